@@ -1,0 +1,82 @@
+"""Test-time inference by error regression over a sliding window (Section 3.5).
+
+At each control step: append the observation, initialise the newest posteriors from their priors
+(Eqs. 1-2), run `er_iterations` Adam steps on the window's posteriors against the free energy (Eq. 9)
+with the network frozen, regenerating the states from the window start after each update, and decode
+the action from A_bottom. With zero iterations no observation is ever read: exact open loop.
+"""
+
+import torch
+from torch import Tensor
+
+from .predictive_model import GMMActionHead, PredictiveModel, RecurrentState, Trajectory
+
+
+class ErrorRegression:
+    """Sliding-window posterior inference for a batch of parallel episodes."""
+
+    def __init__(self, model: PredictiveModel):
+        self.model = model
+        self.config = model.config
+        self.reset()
+
+    def reset(self) -> None:
+        self.step_index = 0  # control steps since reset
+        self.lang_term: Tensor | None = None
+        self.start_state: RecurrentState | None = None  # state before the window's first step
+        self.state: RecurrentState | None = None  # state at the newest step
+        self.posteriors: list[Tensor] = []  # one (batch, 4r) tensor per window step
+        self.vision: list[Tensor] = []
+        self.proprio: list[Tensor] = []
+        self.fresh: list[bool] = []  # whether the step had a fresh visual observation
+
+    def free_energy(self, traj: Trajectory, c_q: Tensor) -> Tensor:
+        """E over the window (Eq. 9) with the inference weights w_ER, er_lambda_v, er_lambda_q."""
+        cfg = self.config
+        eps_v, eps_q = self.model.prediction_errors(traj, torch.stack(self.vision), torch.stack(self.proprio))
+        fresh = eps_v.new_tensor(self.fresh)[:, None]
+        complexity = self.model.complexity(c_q, self.model.priors(traj), (cfg.er_complexity_weight,) * 4)
+        return (cfg.er_lambda_v * eps_v * fresh + cfg.er_lambda_q * eps_q + complexity).sum()
+
+    def __call__(self, language: Tensor, vision: Tensor, proprio: Tensor) -> Tensor:
+        """One control step for a batch; returns the action (batch, action_dim) in normalised units."""
+        model, cfg = self.model, self.config
+        if self.state is None:
+            self.lang_term = model.language_term(language)
+            self.start_state = self.state = model.initial_state(language.shape[0])
+
+        # 1. Newest step: posteriors start at their priors, generated from the recurrent hierarchy alone.
+        with torch.no_grad():
+            state, params, prior = model.step(self.state, self.lang_term, None)
+        fresh = self.step_index % cfg.visual_refresh_interval == 0
+        self.step_index += 1
+        if cfg.er_iterations == 0:  # exact open loop: observations are never read
+            self.state = state
+            return GMMActionHead.mode(params[0], params[1])
+
+        self.posteriors.append(prior)
+        self.vision.append(vision)
+        self.proprio.append(proprio)
+        self.fresh.append(fresh)
+        if len(self.posteriors) > cfg.er_window:  # slide: the oldest posterior is final
+            with torch.no_grad():
+                u = tuple(model.latent[m](c) for m, c in enumerate(self.posteriors[0].chunk(4, dim=-1)))
+                self.start_state = model.step(self.start_state, self.lang_term, u)[0]
+            for buffer in (self.posteriors, self.vision, self.proprio, self.fresh):
+                del buffer[0]
+
+        # 2. n_itr Adam steps on the window's posteriors, network frozen.
+        c_q = torch.stack(self.posteriors).requires_grad_(True)
+        optimizer = torch.optim.Adam([c_q], lr=cfg.er_lr)
+        for _ in range(cfg.er_iterations):
+            traj = model.rollout(self.start_state, self.lang_term, c_q)
+            optimizer.zero_grad(set_to_none=True)
+            self.free_energy(traj, c_q).backward(inputs=[c_q])
+            optimizer.step()
+
+        # 3. Regenerate the window with the updated posteriors and decode the current action.
+        with torch.no_grad():
+            self.posteriors = list(c_q.detach().unbind(0))
+            traj = model.rollout(self.start_state, self.lang_term, c_q.detach())
+        self.state = traj.final
+        return traj.final.a_hat

@@ -1,0 +1,221 @@
+"""The trainable PredVLA network: hierarchical multiple-timescale predictive-coding RNN (Section 3.2).
+
+Modules are evaluated in the order T, V, A_top, A_bottom. Observations never enter this network: it only
+generates visual, proprioceptive and action predictions from its posterior free variables c_q and the
+language vector. Tensors are time-major: (time, batch, features).
+"""
+
+from typing import NamedTuple
+
+import torch
+import torch.nn.functional as F  # noqa: N812
+from torch import Tensor, nn
+from torch.distributions import Categorical, Independent, MixtureSameFamily, Normal
+
+from .configuration_predvla import PredVLAConfig
+
+T, V, A_TOP, A_BOTTOM = range(4)
+
+
+class RecurrentState(NamedTuple):
+    """State carried between control steps: module outputs d^l = tanh(h^l) and efference predictions."""
+
+    h: tuple[Tensor, Tensor, Tensor, Tensor]
+    d: tuple[Tensor, Tensor, Tensor, Tensor]
+    a_hat: Tensor  # \hat a_{t-1}, the model's own previous action (Eq. 6)
+    q_hat: Tensor  # \hat q_{t-1}, the model's own previous proprioception prediction (Eq. 6)
+
+    def detach(self) -> "RecurrentState":
+        return RecurrentState(
+            tuple(x.detach() for x in self.h), tuple(x.detach() for x in self.d),
+            self.a_hat.detach(), self.q_hat.detach(),
+        )
+
+
+class Trajectory(NamedTuple):
+    """Outputs of a rollout over a sequence; every field is (time, batch, ...)."""
+
+    d: tuple[Tensor, Tensor, Tensor, Tensor]  # module outputs at each step
+    d_prev_top: Tensor  # d^T_{t-1}, input of the root prior (Eq. 2)
+    q_hat: Tensor
+    a_hat: Tensor
+    action_params: tuple[Tensor, Tensor, Tensor]  # GMM logits, means, scales
+    final: RecurrentState
+
+
+def mlp(in_dim: int, hidden_dim: int, out_dim: int) -> nn.Sequential:
+    """Two-layer decoder head: Linear-ReLU-Linear (Section 3.2, Decoders)."""
+    return nn.Sequential(nn.Linear(in_dim, hidden_dim), nn.ReLU(), nn.Linear(hidden_dim, out_dim))
+
+
+class GMMActionHead(nn.Module):
+    """K-component diagonal Gaussian mixture over the action, tanh means, softplus scales + minimum."""
+
+    def __init__(self, in_dim: int, hidden_dim: int, action_dim: int, num_mixtures: int, min_scale: float):
+        super().__init__()
+        self.action_dim, self.num_mixtures, self.min_scale = action_dim, num_mixtures, min_scale
+        self.net = mlp(in_dim, hidden_dim, num_mixtures * (1 + 2 * action_dim))
+
+    def forward(self, d: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        k, a = self.num_mixtures, self.action_dim
+        out = self.net(d)
+        logits, means, scales = out.split([k, k * a, k * a], dim=-1)
+        means = torch.tanh(means).unflatten(-1, (k, a))
+        scales = (F.softplus(scales) + self.min_scale).unflatten(-1, (k, a))
+        return logits, means, scales
+
+    @staticmethod
+    def distribution(logits: Tensor, means: Tensor, scales: Tensor) -> MixtureSameFamily:
+        return MixtureSameFamily(Categorical(logits=logits), Independent(Normal(means, scales), 1))
+
+    @staticmethod
+    def mode(logits: Tensor, means: Tensor) -> Tensor:
+        """Executed action: the mean of the highest-weight component (Section 3.2)."""
+        index = logits.argmax(dim=-1, keepdim=True).unsqueeze(-1).expand(*means.shape[:-2], 1, means.shape[-1])
+        return means.gather(-2, index).squeeze(-2)
+
+
+class PredictiveModel(nn.Module):
+    """Generative dynamics of Eqs. 1-6 with the v, q and action decoders.
+
+    Parameter reading that gives the paper's 675,732 (Table 1): priors are Linear with bias; recurrent,
+    top-down, latent (U) and language maps have no bias, plus one bias vector b^l per module; efference
+    maps and the 256-32-256 bottleneck have no bias; the v, q and action heads are Linear(256, 256)-ReLU-
+    Linear; each module has a learnable initial state.
+    """
+
+    def __init__(self, config: PredVLAConfig):
+        super().__init__()
+        self.config = config
+        d_t, d_v, d_at, d_ab = dims = config.module_dims
+        r = config.latent_dim
+        self.alpha = tuple(1.0 / t for t in config.tau)  # 1 / tau_l (Eqs. 3-4)
+        # Eqs. 1-2: priors from d^T_{t-1} (root), d^T_t (V, A_top), d^{A_top}_t (A_bottom).
+        self.prior = nn.ModuleList(
+            [nn.Linear(d_t, r), nn.Linear(d_t, r), nn.Linear(d_t, r), nn.Linear(d_at, r)]
+        )
+        # Eqs. 3-4: W_rec, W_td, U and b^l.
+        self.rec = nn.ModuleList([nn.Linear(d, d, bias=False) for d in dims])
+        self.td = nn.ModuleList(
+            [nn.Linear(d_t, d_v, bias=False), nn.Linear(d_t, d_at, bias=False), nn.Linear(d_at, d_ab, bias=False)]
+        )
+        self.latent = nn.ModuleList([nn.Linear(r, d, bias=False) for d in dims])
+        self.bias = nn.ParameterList([nn.Parameter(torch.zeros(d)) for d in dims])
+        self.lang = nn.Linear(config.language_dim, d_t, bias=False)  # W_lang (Eq. 4)
+        # Eq. 5: visual-to-action bottleneck z = W_VA d^V, beta^{A_top} = W_top z.
+        self.bottleneck_in = nn.Linear(d_v, config.bottleneck_dim, bias=False)
+        self.bottleneck_out = nn.Linear(config.bottleneck_dim, d_at, bias=False)
+        # Eq. 6: efference copy beta^V = W_ba a_hat_{t-1} + W_bq q_hat_{t-1}.
+        self.efference_a = nn.Linear(config.action_dim, d_v, bias=False)
+        self.efference_q = nn.Linear(config.proprio_dim, d_v, bias=False)
+        # Decoders.
+        self.v_head = mlp(d_v, config.head_hidden_dim, config.vision_dim)
+        self.q_head = mlp(d_ab, config.head_hidden_dim, config.proprio_dim)
+        self.action_head = GMMActionHead(
+            d_ab, config.head_hidden_dim, config.action_dim, config.num_mixtures, config.min_action_scale
+        )
+        self.h0 = nn.ParameterList([nn.Parameter(torch.zeros(d)) for d in dims])  # learnable initial states
+
+    @property
+    def posterior_dim(self) -> int:
+        """Size of one step's posterior, all modules concatenated (4 x r)."""
+        return 4 * self.config.latent_dim
+
+    def language_term(self, language: Tensor) -> Tensor:
+        """W_lang l, constant over an episode (Eq. 4)."""
+        return self.lang(language)
+
+    def initial_state(self, batch_size: int) -> RecurrentState:
+        h = tuple(h0.expand(batch_size, -1) for h0 in self.h0)
+        d = tuple(torch.tanh(x) for x in h)
+        q_hat, a_hat = self._efference(d[A_BOTTOM])[:2]
+        return RecurrentState(h, d, a_hat, q_hat)
+
+    def _efference(self, d_ab: Tensor) -> tuple[Tensor, Tensor, tuple[Tensor, Tensor, Tensor]]:
+        """Proprioceptive prediction, executed action and GMM parameters decoded from A_bottom."""
+        params = self.action_head(d_ab)
+        return self.q_head(d_ab), GMMActionHead.mode(params[0], params[1]), params
+
+    def _leaky(self, module: int, h: Tensor, pre: Tensor) -> Tensor:
+        a = self.alpha[module]
+        return (1.0 - a) * h + a * torch.tanh(pre)  # Eqs. 3-4
+
+    def step(
+        self, state: RecurrentState, lang_term: Tensor, u: tuple[Tensor, ...] | None
+    ) -> tuple[RecurrentState, tuple[Tensor, Tensor, Tensor], Tensor | None]:
+        """Advance one control step.
+
+        `u` holds U^l c^l_{q,t} per module. With `u=None` every posterior is set to its prior, computed on
+        the fly in module order (error regression's newest step, and exact open loop). Returns the new
+        state, the GMM parameters and, when `u` was None, the posteriors used (= priors).
+        """
+        (h_t, h_v, h_at, h_ab), (d_t, d_v, d_at, d_ab) = state.h, state.d
+        used = []
+
+        def latent(module: int, prior_input: Tensor) -> Tensor:
+            if u is not None:
+                return u[module]
+            c = self.prior[module](prior_input)
+            used.append(c)
+            return self.latent[module](c)
+
+        h_t = self._leaky(T, h_t, self.rec[T](d_t) + latent(T, d_t) + lang_term + self.bias[T])
+        d_t = torch.tanh(h_t)
+        beta_v = self.efference_a(state.a_hat) + self.efference_q(state.q_hat)
+        h_v = self._leaky(V, h_v, self.rec[V](d_v) + self.td[0](d_t) + latent(V, d_t) + beta_v + self.bias[V])
+        d_v = torch.tanh(h_v)
+        beta_at = self.bottleneck_out(self.bottleneck_in(d_v))
+        h_at = self._leaky(
+            A_TOP, h_at, self.rec[A_TOP](d_at) + self.td[1](d_t) + latent(A_TOP, d_t) + beta_at + self.bias[A_TOP]
+        )
+        d_at = torch.tanh(h_at)
+        h_ab = self._leaky(
+            A_BOTTOM, h_ab, self.rec[A_BOTTOM](d_ab) + self.td[2](d_at) + latent(A_BOTTOM, d_at) + self.bias[A_BOTTOM]
+        )
+        d_ab = torch.tanh(h_ab)
+        q_hat, a_hat, params = self._efference(d_ab)
+        new_state = RecurrentState((h_t, h_v, h_at, h_ab), (d_t, d_v, d_at, d_ab), a_hat, q_hat)
+        return new_state, params, (torch.cat(used, dim=-1) if u is None else None)
+
+    def rollout(self, state: RecurrentState, lang_term: Tensor, c_q: Tensor) -> Trajectory:
+        """Regenerate the states over a sequence from posteriors c_q of shape (time, batch, 4r)."""
+        # U^l c^l_q for all steps at once; `unbind` avoids the T^2 backward of indexing in the loop.
+        per_module = c_q.chunk(4, dim=-1)
+        u_seq = list(zip(*(self.latent[m](per_module[m]).unbind(0) for m in range(4)), strict=True))
+        d_prev_top, outs, params = [], [], []
+        for u in u_seq:
+            d_prev_top.append(state.d[T])
+            state, p, _ = self.step(state, lang_term, u)
+            outs.append(state)
+            params.append(p)
+        d = tuple(torch.stack([s.d[m] for s in outs]) for m in range(4))
+        return Trajectory(
+            d=d,
+            d_prev_top=torch.stack(d_prev_top),
+            q_hat=torch.stack([s.q_hat for s in outs]),
+            a_hat=torch.stack([s.a_hat for s in outs]),
+            action_params=tuple(torch.stack(x) for x in zip(*params, strict=True)),
+            final=state,
+        )
+
+    def priors(self, traj: Trajectory) -> Tensor:
+        """c_p for every step of a trajectory (Eqs. 1-2), (time, batch, 4r)."""
+        d_t, _, d_at, _ = traj.d
+        return torch.cat(
+            [self.prior[T](traj.d_prev_top), self.prior[V](d_t), self.prior[A_TOP](d_t), self.prior[A_BOTTOM](d_at)],
+            dim=-1,
+        )
+
+    def complexity(self, c_q: Tensor, c_p: Tensor, weights: tuple[float, ...]) -> Tensor:
+        """C_t = sum_l w_l 1/2 ||c^l_q - c^l_p||^2 (Eq. 8), per step: (time, batch)."""
+        sq = (c_q - c_p).pow(2).unflatten(-1, (4, self.config.latent_dim)).sum(-1)
+        return 0.5 * (sq * sq.new_tensor(weights)).sum(-1)
+
+    def prediction_errors(self, traj: Trajectory, vision: Tensor, proprio: Tensor) -> tuple[Tensor, Tensor]:
+        """Per-dimension mean squared errors eps_v(t), eps_q(t) (Eq. 7), each (time, batch)."""
+        v_hat = self.v_head(traj.d[V])
+        return (vision - v_hat).pow(2).mean(-1), (proprio - traj.q_hat).pow(2).mean(-1)
+
+    def action_nll(self, traj: Trajectory, action: Tensor) -> Tensor:
+        """Negative log-likelihood of the demonstrated action under the GMM head, (time, batch)."""
+        return -GMMActionHead.distribution(*traj.action_params).log_prob(action)
