@@ -1,0 +1,104 @@
+"""Fitting the front end's PCA bases jointly on LIBERO demonstrations (Section 4.1)."""
+
+import importlib.metadata
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from lerobot_predvla.frontend.artefact import FrontendArtefact
+from lerobot_predvla.frontend.language import LanguageEncoder
+from lerobot_predvla.frontend.libero_hdf5 import CAMERAS, read_demo, scan_suites
+from lerobot_predvla.frontend.pca import fit_pca
+from lerobot_predvla.frontend.preprocessing import PreprocessingSpec, libero_hdf5_to_lerobot, preprocess_images
+from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
+
+DEFAULT_SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+
+
+@dataclass
+class FitFrontendConfig:
+    """Settings of `predvla fit-frontend`.
+
+    Args:
+        hdf5_root: Directory holding one sub-directory of `*_demo.hdf5` files per suite.
+        suites: Suites whose demonstrations are pooled (the paper pools all four).
+        vision_weights: ResNet18 weights.
+        language_dim: Language PCA components (Table 1: 64).
+        vision_dim_per_camera: Visual PCA components per camera (Table 1: 96).
+        precision: Precision of the ResNet18 features, "bf16" (fast) or "fp32"; recorded and reused.
+        preprocessing: Image preprocessing.
+        frame_stride: Use every n-th frame for the visual PCA (1 = all frames).
+        batch_size: Images per ResNet18 forward pass.
+    """
+
+    hdf5_root: Path
+    vision_weights: VisionWeights
+    suites: tuple[str, ...] = DEFAULT_SUITES
+    language_dim: int = 64
+    vision_dim_per_camera: int = 96
+    precision: str = "bf16"
+    preprocessing: PreprocessingSpec = field(default_factory=PreprocessingSpec)
+    frame_stride: int = 1
+    batch_size: int = 64
+
+
+def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
+    """Encode the demonstrations with the frozen encoders and fit the language and per-camera PCA bases."""
+    if cfg.frame_stride < 1:
+        raise ValueError(f"frame_stride must be >= 1, got {cfg.frame_stride}.")
+    start = time.perf_counter()
+    refs = scan_suites(cfg.hdf5_root, list(cfg.suites))
+    vision = VisionEncoder(cfg.vision_weights, cfg.precision, batch_size=cfg.batch_size)
+    language = LanguageEncoder()
+
+    features: dict[str, list[torch.Tensor]] = {camera: [] for camera in CAMERAS}
+    total = sum(len(range(0, ref.num_frames, cfg.frame_stride)) for ref in refs)
+    with tqdm(total=total, desc="encoding frames", unit="frame") as progress:
+        for ref in refs:
+            demo = read_demo(ref, cfg.frame_stride)
+            for camera, images in demo.images.items():
+                pixels = preprocess_images(libero_hdf5_to_lerobot(images), cfg.preprocessing)
+                features[camera].append(vision(pixels))
+            progress.update(len(demo.action))
+
+    # One instruction embedding per demonstration: each demonstration weighs the same.
+    instructions = [ref.instruction for ref in refs]
+    language_basis = fit_pca(language(instructions), cfg.language_dim)
+    cameras = {camera: fit_pca(torch.cat(f).numpy(), cfg.vision_dim_per_camera) for camera, f in features.items()}
+    return FrontendArtefact(
+        language=language_basis,
+        cameras=cameras,
+        vision_weights=cfg.vision_weights,
+        vision_fingerprint=vision.fingerprint,
+        vision_precision=cfg.precision,
+        language_source=language.source,
+        language_fingerprint=language.fingerprint,
+        preprocessing=cfg.preprocessing,
+        fit={
+            "hdf5_root": str(Path(cfg.hdf5_root).resolve()),
+            "suites": list(cfg.suites),
+            "num_files": len({ref.file for ref in refs}),
+            "num_demos": len(refs),
+            "num_frames": sum(ref.num_frames for ref in refs),
+            "frame_stride": cfg.frame_stride,
+            "num_distinct_instructions": len(set(instructions)),
+            "seconds": round(time.perf_counter() - start, 1),
+            "versions": {
+                pkg: importlib.metadata.version(pkg)
+                for pkg in ("torch", "torchvision", "sentence-transformers", "scikit-learn", "lerobot")
+            },
+        },
+    )
+
+
+def variance_summary(artefact: FrontendArtefact) -> str:
+    """One line saying how much of each PCA basis carries variance."""
+    parts = [f"language {artefact.language.components_with_variance}/{artefact.language_dim}"]
+    for camera, basis in artefact.cameras.items():
+        kept = float(np.sum(basis.explained_variance_ratio))
+        parts.append(f"{camera} {basis.components_with_variance}/{basis.n_components} ({kept:.1%} of variance)")
+    return "components carrying variance: " + ", ".join(parts)

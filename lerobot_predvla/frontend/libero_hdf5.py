@@ -1,0 +1,155 @@
+"""Reader and validator of the original LIBERO hdf5 demonstrations (`<suite>/<task>_demo.hdf5`).
+
+Every problem is reported as a `LiberoDataError` naming the file, the demonstration and the key.
+`scan_suites` validates the structure of all files (shapes only, no pixel data) before any work starts.
+"""
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+# LeRobot camera keys (as LeRobot's LIBERO env names them) -> hdf5 observation keys.
+CAMERAS = {"observation.images.image": "agentview_rgb", "observation.images.image2": "eye_in_hand_rgb"}
+JOINT_KEY, GRIPPER_KEY, ACTION_KEY = "obs/joint_states", "obs/gripper_states", "actions"
+JOINT_DIM, GRIPPER_DIM, ACTION_DIM = 7, 2, 7
+DEMO_FILE_SUFFIX = "_demo.hdf5"
+_DEMO_NAME = re.compile(r"demo_(\d+)")
+
+
+class LiberoDataError(ValueError):
+    """Invalid LIBERO input, located by file, demonstration and key."""
+
+    def __init__(self, file: Path | str, message: str, demo: str | None = None, key: str | None = None):
+        where = f"{file}" + (f", demo '{demo}'" if demo else "") + (f", key '{key}'" if key else "")
+        super().__init__(f"{where}: {message}")
+
+
+@dataclass(frozen=True)
+class DemoRef:
+    """A validated demonstration: where it is, its length, instruction and image shapes."""
+
+    file: Path
+    demo: str
+    num_frames: int
+    instruction: str
+    image_shapes: tuple[tuple[int, int, int], ...]  # Per camera, in `CAMERAS` order.
+
+
+@dataclass
+class LiberoDemo:
+    """Arrays of one demonstration. Images are raw hdf5 pixels (upside down), uint8 (N, H, W, 3)."""
+
+    ref: DemoRef
+    images: dict[str, np.ndarray]
+    state: np.ndarray  # (N, 9) float32: joint_states (7) + gripper_states (2).
+    action: np.ndarray  # (N, 7) float32.
+
+
+def suite_files(hdf5_root: Path | str, suite: str) -> list[Path]:
+    """The `*_demo.hdf5` files of a suite, sorted by name."""
+    directory = Path(hdf5_root) / suite
+    if not directory.is_dir():
+        raise LiberoDataError(directory, f"suite directory of '{suite}' does not exist")
+    files = sorted(directory.glob(f"*{DEMO_FILE_SUFFIX}"))
+    if not files:
+        raise LiberoDataError(directory, f"no *{DEMO_FILE_SUFFIX} files in suite '{suite}'")
+    return files
+
+
+def _instruction(path: Path, data: h5py.Group) -> str:
+    key = "data.attrs['problem_info']"
+    if "problem_info" not in data.attrs:
+        raise LiberoDataError(path, "not a LIBERO demonstration file (no problem_info attribute)", key=key)
+    try:
+        instruction = json.loads(data.attrs["problem_info"])["language_instruction"]
+    except (json.JSONDecodeError, KeyError, TypeError) as err:
+        raise LiberoDataError(path, f"problem_info has no language_instruction ({err!r})", key=key) from err
+    if isinstance(instruction, list):  # Some LIBERO files store the instruction as a word list.
+        instruction = " ".join(instruction)
+    instruction = str(instruction).strip()
+    if not instruction:
+        raise LiberoDataError(path, "empty language_instruction", key=key)
+    return instruction
+
+
+def _check_demo(path: Path, name: str, group: h5py.Group, instruction: str) -> DemoRef:
+    expected = {ACTION_KEY: (ACTION_DIM,), JOINT_KEY: (JOINT_DIM,), GRIPPER_KEY: (GRIPPER_DIM,)}
+    lengths = {}
+    image_shapes = []
+    for key in [ACTION_KEY, JOINT_KEY, GRIPPER_KEY, *(f"obs/{k}" for k in CAMERAS.values())]:
+        if key not in group:
+            raise LiberoDataError(path, "missing key", name, key)
+        dataset = group[key]
+        if not isinstance(dataset, h5py.Dataset):
+            raise LiberoDataError(path, "is a group, expected an array", name, key)
+        shape = dataset.shape
+        if key in expected:
+            if len(shape) != 2 or shape[1:] != expected[key]:
+                raise LiberoDataError(path, f"shape {shape}, expected (N, {expected[key][0]})", name, key)
+        elif len(shape) != 4 or shape[3] != 3 or dataset.dtype != np.uint8:
+            raise LiberoDataError(path, f"shape {shape} {dataset.dtype}, expected uint8 (N, H, W, 3)", name, key)
+        else:
+            image_shapes.append(tuple(shape[1:]))
+        lengths[key] = shape[0]
+    num_frames = lengths[ACTION_KEY]
+    if num_frames == 0:
+        raise LiberoDataError(path, "empty demonstration (0 steps)", name, ACTION_KEY)
+    for key, length in lengths.items():
+        if length != num_frames:
+            raise LiberoDataError(
+                path, f"observation/action length mismatch: {length} steps, '{ACTION_KEY}' has {num_frames}",
+                name, key,
+            )
+    return DemoRef(path, name, num_frames, instruction, tuple(image_shapes))
+
+
+def scan_file(path: Path | str) -> list[DemoRef]:
+    """Validate one LIBERO file's structure and list its demonstrations in numeric order."""
+    path = Path(path)
+    try:
+        with h5py.File(path, "r") as f:
+            if "data" not in f or not isinstance(f["data"], h5py.Group):
+                raise LiberoDataError(path, "not a LIBERO demonstration file (no 'data' group)", key="data")
+            data = f["data"]
+            instruction = _instruction(path, data)
+            names = sorted((n for n in data if _DEMO_NAME.fullmatch(n)), key=lambda n: int(n[5:]))
+            if not names:
+                raise LiberoDataError(path, "no demonstrations (no data/demo_<i> groups)", key="data")
+            return [_check_demo(path, name, data[name], instruction) for name in names]
+    except LiberoDataError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError) as err:  # h5py reports corruption as these.
+        raise LiberoDataError(path, f"corrupt or unreadable HDF5 file ({err})") from err
+
+
+def scan_suites(hdf5_root: Path | str, suites: list[str]) -> list[DemoRef]:
+    """Validate every file of the given suites; all demonstrations must share image shapes."""
+    refs = [ref for suite in suites for path in suite_files(hdf5_root, suite) for ref in scan_file(path)]
+    first = refs[0]
+    for ref in refs:
+        if ref.image_shapes != first.image_shapes:
+            raise LiberoDataError(
+                ref.file, f"image shapes {ref.image_shapes} differ from {first.image_shapes} in {first.file}",
+                ref.demo, "obs/" + CAMERAS["observation.images.image"],
+            )
+    return refs
+
+
+def read_demo(ref: DemoRef, frame_stride: int = 1) -> LiberoDemo:
+    """Read one demonstration's arrays (every `frame_stride`-th frame)."""
+    key = None
+    try:
+        with h5py.File(ref.file, "r") as f:
+            group = f["data"][ref.demo]
+            arrays = {}
+            for key in [ACTION_KEY, JOINT_KEY, GRIPPER_KEY, *(f"obs/{k}" for k in CAMERAS.values())]:
+                arrays[key] = group[key][::frame_stride]
+    except (OSError, RuntimeError, KeyError, ValueError) as err:
+        raise LiberoDataError(ref.file, f"cannot read data ({err})", ref.demo, key) from err
+    state = np.concatenate([arrays[JOINT_KEY], arrays[GRIPPER_KEY]], axis=1).astype(np.float32)
+    images = {camera: arrays[f"obs/{k}"] for camera, k in CAMERAS.items()}
+    return LiberoDemo(ref, images, state, arrays[ACTION_KEY].astype(np.float32))

@@ -1,0 +1,67 @@
+"""Tiny hdf5 files in the exact original LIBERO layout (see FACTS.md), for the front-end tests."""
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+IMAGE_SIZE = 128
+RAW_TOP_ROWS = 4  # Raw (upside-down) images carry a pure red band in their first rows.
+
+
+def raw_images(num_frames: int, seed: int, size: int = IMAGE_SIZE) -> np.ndarray:
+    """Smooth uint8 (N, H, W, 3) frames: a gradient, a moving square and a red band on raw row 0."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:size, 0:size] / size
+    base = np.stack([xx, yy, 1 - xx * yy], axis=-1) * rng.uniform(80, 200, 3)
+    frames = np.repeat(base[None], num_frames, axis=0)
+    for t in range(num_frames):
+        y, x = (int(v) for v in rng.integers(RAW_TOP_ROWS, size - 24, 2))
+        frames[t, y : y + 20, x : x + 20] = rng.uniform(0, 255, 3)
+    frames[:, :RAW_TOP_ROWS] = (255, 0, 0)
+    return frames.astype(np.uint8)
+
+
+def write_libero_file(
+    path: Path, instruction: str, lengths: list[int], seed: int = 0, size: int = IMAGE_SIZE
+) -> dict[str, dict[str, np.ndarray]]:
+    """Write `<task>_demo.hdf5` with one demo per length; returns the arrays written per demo."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    written = {}
+    with h5py.File(path, "w") as f:
+        data = f.create_group("data")
+        data.attrs["env_name"] = "Libero_Tabletop_Manipulation"
+        data.attrs["problem_info"] = json.dumps(
+            {"problem_name": "libero_tabletop_manipulation", "domain_name": "robosuite",
+             "language_instruction": instruction}
+        )
+        data.attrs["bddl_file_name"] = f"libero/bddl_files/{path.stem}.bddl"
+        data.attrs["bddl_file_content"] = "(define (problem LIBERO_Tabletop_Manipulation))"
+        data.attrs["env_args"] = json.dumps({"type": 1, "env_name": "Libero_Tabletop_Manipulation"})
+        data.attrs["num_demos"] = len(lengths)
+        data.attrs["total"] = sum(lengths)
+        for i, n in enumerate(lengths):
+            demo = data.create_group(f"demo_{i}")
+            arrays = {
+                "obs/agentview_rgb": raw_images(n, seed * 100 + 2 * i, size),
+                "obs/eye_in_hand_rgb": raw_images(n, seed * 100 + 2 * i + 1, size),
+                "obs/joint_states": rng.normal(size=(n, 7)),
+                "obs/gripper_states": rng.uniform(-0.04, 0.04, size=(n, 2)),
+                "obs/ee_states": rng.normal(size=(n, 6)),
+                "obs/ee_pos": rng.normal(size=(n, 3)),
+                "obs/ee_ori": rng.normal(size=(n, 3)),
+                "actions": rng.uniform(-1, 1, size=(n, 7)),
+                "states": rng.normal(size=(n, 47)),
+                "robot_states": rng.normal(size=(n, 9)),
+                "rewards": np.zeros(n, dtype=np.uint8),
+                "dones": np.eye(1, n, n - 1, dtype=np.uint8)[0],
+            }
+            for key, value in arrays.items():
+                demo.create_dataset(key, data=value)
+            demo.attrs["num_samples"] = n
+            demo.attrs["init_state"] = rng.normal(size=47)
+            demo.attrs["model_file"] = "<mujoco/>"
+            written[f"demo_{i}"] = arrays
+    return written
