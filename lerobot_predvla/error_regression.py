@@ -40,20 +40,29 @@ class ErrorRegression:
 
     def __call__(self, language: Tensor, vision: Tensor, proprio: Tensor) -> Tensor:
         """One control step for a batch; returns the action (batch, action_dim) in normalised units."""
+        open_loop_action = self.observe(language, vision, proprio)
+        if open_loop_action is not None:
+            return open_loop_action
+        self.infer()
+        return self.act()
+
+    def observe(self, language: Tensor, vision: Tensor, proprio: Tensor) -> Tensor | None:
+        """Step 1: append the observation; the newest posteriors start at their priors (Eqs. 1-2).
+
+        Returns the action directly in exact open loop (`er_iterations == 0`), where observations are
+        never stored nor read.
+        """
         model, cfg = self.model, self.config
         if self.state is None:
             self.lang_term = model.language_term(language)
             self.start_state = self.state = model.initial_state(language.shape[0])
-
-        # 1. Newest step: posteriors start at their priors, generated from the recurrent hierarchy alone.
         with torch.no_grad():
             state, params, prior = model.step(self.state, self.lang_term, None)
         fresh = self.step_index % cfg.visual_refresh_interval == 0
         self.step_index += 1
-        if cfg.er_iterations == 0:  # exact open loop: observations are never read
+        if cfg.er_iterations == 0:
             self.state = state
             return GMMActionHead.mode(params[0], params[1])
-
         self.posteriors.append(prior)
         self.vision.append(vision)
         self.proprio.append(proprio)
@@ -64,19 +73,29 @@ class ErrorRegression:
                 self.start_state = model.step(self.start_state, self.lang_term, u)[0]
             for buffer in (self.posteriors, self.vision, self.proprio, self.fresh):
                 del buffer[0]
+        return None
 
-        # 2. n_itr Adam steps on the window's posteriors, network frozen.
+    def window_free_energy(self) -> Tensor:
+        """Free energy of the window at the current posteriors (no gradient)."""
+        with torch.no_grad():
+            c_q = torch.stack(self.posteriors)
+            return self.free_energy(self.model.rollout(self.start_state, self.lang_term, c_q), c_q)
+
+    def infer(self) -> None:
+        """Step 2: n_itr Adam steps on the window's posteriors, network frozen, states regenerated."""
+        model = self.model
         c_q = torch.stack(self.posteriors).requires_grad_(True)
-        optimizer = torch.optim.Adam([c_q], lr=cfg.er_lr)
-        for _ in range(cfg.er_iterations):
+        optimizer = torch.optim.Adam([c_q], lr=self.config.er_lr)
+        for _ in range(self.config.er_iterations):
             traj = model.rollout(self.start_state, self.lang_term, c_q)
             optimizer.zero_grad(set_to_none=True)
             self.free_energy(traj, c_q).backward(inputs=[c_q])
             optimizer.step()
+        self.posteriors = list(c_q.detach().unbind(0))
 
-        # 3. Regenerate the window with the updated posteriors and decode the current action.
+    def act(self) -> Tensor:
+        """Step 3: regenerate the window from the updated posteriors and decode the action from A_bottom."""
         with torch.no_grad():
-            self.posteriors = list(c_q.detach().unbind(0))
-            traj = model.rollout(self.start_state, self.lang_term, c_q.detach())
+            traj = self.model.rollout(self.start_state, self.lang_term, torch.stack(self.posteriors))
         self.state = traj.final
         return traj.final.a_hat

@@ -1,0 +1,215 @@
+"""Equation-level checks of the PredVLA policy: parameters, open loop, priors, error regression, masks, I/O."""
+
+import dataclasses
+
+import pytest
+import torch
+from lerobot.datasets import LeRobotDatasetMetadata
+from lerobot.policies.factory import make_policy
+from safetensors import safe_open
+
+from lerobot_predvla import PredVLAConfig, PredVLAPolicy
+from lerobot_predvla.configuration_predvla import LONG_HORIZON_TAU
+from lerobot_predvla.posterior_store import POSTERIOR_STORE_FILE
+
+
+def observation(batch: int = 1, seed: int = 0) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    return {
+        "observation.language_features": torch.randn(batch, 64, generator=g),
+        "observation.vision_features": torch.randn(batch, 192, generator=g),
+        "observation.state": torch.randn(batch, 9, generator=g),
+    }
+
+
+def stream(steps: int, batch: int = 1, seed: int = 0, language_seed: int = 0) -> list[dict[str, torch.Tensor]]:
+    language = observation(batch, language_seed)["observation.language_features"]
+    return [{**observation(batch, seed * 1000 + t), "observation.language_features": language} for t in range(steps)]
+
+
+def randomised_policy(**overrides) -> PredVLAPolicy:
+    """A policy whose biases and initial states are non-zero too, so no pathway is trivially silent."""
+    torch.manual_seed(0)
+    policy = PredVLAPolicy(PredVLAConfig(device="cpu", **overrides))
+    with torch.no_grad():
+        for p in policy.model.parameters():
+            if p.dim() == 1:
+                p.normal_(0, 0.3)
+    return policy.eval()
+
+
+def run(policy: PredVLAPolicy, observations: list[dict]) -> torch.Tensor:
+    policy.reset()
+    with torch.inference_mode():  # as lerobot-eval calls it
+        return torch.stack([policy.select_action(o) for o in observations])
+
+
+@pytest.fixture(scope="module")
+def trained_policy(synthetic_dataset) -> PredVLAPolicy:
+    """A policy built like lerobot-train builds it, after a few optimiser steps."""
+    meta = LeRobotDatasetMetadata("local/predvla_synthetic", root=synthetic_dataset)
+    policy = make_policy(PredVLAConfig(device="cpu", sequence_length=32, er_window=8, er_iterations=3), ds_meta=meta)
+    optimizer = torch.optim.Adam(policy.get_optim_params(), lr=1e-3)
+    for step in range(3):
+        loss, _ = policy.forward({"episode_index": torch.tensor([step, step + 1, 5])})
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    return policy.eval()
+
+
+def test_parameter_count_matches_table_1():
+    policy = PredVLAPolicy(PredVLAConfig())
+    assert sum(p.numel() for p in policy.parameters() if p.requires_grad) == 675_732
+    assert policy.posterior_store is None  # no dataset: the controller only
+
+
+def test_defaults_match_tables_1_and_2():
+    c = PredVLAConfig()
+    assert (c.language_dim, c.vision_dim_per_camera, c.num_cameras, c.vision_dim, c.proprio_dim, c.action_dim) == (
+        64, 96, 2, 192, 9, 7)
+    assert c.module_dims == (64, 256, 256, 256) and c.latent_dim == 64 and c.bottleneck_dim == 32
+    assert (c.num_mixtures, c.min_action_scale, c.tau, c.visual_refresh_interval) == (5, 0.05, (16, 8, 5, 2), 4)
+    assert (c.optimizer_lr, c.posterior_lr, c.optimizer_weight_decay) == (6e-5, 1e-2, 1e-4)
+    assert (c.train_batch_size, c.train_steps, c.sequence_length) == (32, 30_000, 200)
+    assert (c.lambda_v, c.lambda_q, c.lambda_a, c.complexity_weights) == (1, 1, 1, (0.05, 0.02, 0.02, 0.01))
+    assert (c.er_window, c.er_iterations, c.er_lr, c.er_complexity_weight) == (40, 10, 0.05, 1.0)
+    assert c.get_scheduler_preset() is None and c.get_optimizer_preset().grad_clip_norm > 0
+    long = PredVLAConfig.long_horizon()
+    assert long.tau == LONG_HORIZON_TAU == (30, 14, 8, 2) and long.sequence_length == 500
+
+
+def test_open_loop_is_exact_at_zero_iterations():
+    """n_itr = 0: actions are the prior rollout and do not depend on vision or proprioception at all."""
+    policy = randomised_policy(er_iterations=0)
+    a = run(policy, stream(12, seed=1))
+    b = run(policy, stream(12, seed=2))  # same language, other observations
+    assert torch.equal(a, b)
+    # The same actions from the generative model alone: posterior = prior at every step.
+    model = policy.model
+    lang = model.language_term(stream(1)[0]["observation.language_features"])
+    state, manual = model.initial_state(1), []
+    with torch.no_grad():
+        for _ in range(12):
+            state, params, _ = model.step(state, lang, None)
+            manual.append(state.a_hat)
+    assert torch.equal(a, torch.stack(manual))
+    # With error regression the observations do matter.
+    closed = randomised_policy(er_iterations=2, er_window=6)
+    assert not torch.allclose(run(closed, stream(12, seed=1)), run(closed, stream(12, seed=2)))
+
+
+def test_newest_posterior_starts_at_its_prior():
+    policy = randomised_policy(er_iterations=3, er_window=5)
+    er = policy.error_regression
+    for obs in stream(9):  # past the window length, so the window has slid
+        feed(er, obs)
+        c_q = torch.stack(er.posteriors)
+        with torch.no_grad():
+            priors = policy.model.priors(policy.model.rollout(er.start_state, er.lang_term, c_q))
+        torch.testing.assert_close(c_q[-1], priors[-1], rtol=0, atol=1e-6)
+        assert len(er.posteriors) <= 5
+        er.infer()
+        er.act()
+        assert not torch.allclose(torch.stack(er.posteriors)[-1], priors[-1])  # inference moved it
+
+
+def feed(er, obs: dict[str, torch.Tensor]) -> None:
+    er.observe(*(obs[k] for k in ("observation.language_features", "observation.vision_features", "observation.state")))
+
+
+def test_free_energy_gradient_matches_finite_differences():
+    policy = randomised_policy(er_iterations=1, er_window=4).double()
+    er = policy.error_regression
+    for obs in stream(6):
+        feed(er, {k: v.double() for k, v in obs.items()})
+    c_q = torch.stack(er.posteriors).clone().requires_grad_(True)
+    assert torch.autograd.gradcheck(
+        lambda c: er.free_energy(policy.model.rollout(er.start_state, er.lang_term, c), c), (c_q,), eps=1e-6, atol=1e-5
+    )
+
+
+def test_error_regression_lowers_window_free_energy():
+    """Every control step's inference ends below where it started.
+
+    The network is made responsive to its latents (U scaled up, as training does) and the step is small:
+    Adam's sign-like first updates move every coordinate by the step size, and on an untrained network
+    the unit-weight complexity curvature outweighs the first-order decrease at the paper's 0.05.
+    """
+    policy = randomised_policy(er_iterations=10, er_window=8, er_lr=0.005)
+    with torch.no_grad():
+        for latent_map in policy.model.latent:
+            latent_map.weight.mul_(3.0)
+    er = policy.error_regression
+    for t, obs in enumerate(stream(12)):
+        feed(er, obs)
+        before = er.window_free_energy()
+        er.infer()
+        after = er.window_free_energy()
+        assert after < before, f"step {t}: free energy {before:.5f} -> {after:.5f}"
+        er.act()
+
+
+def test_batched_environments_match_single_runs():
+    policy = randomised_policy(er_iterations=3, er_window=6)
+    both = run(policy, stream(8, batch=2, seed=3))
+    for i in range(2):
+        single = [{k: v[i : i + 1] for k, v in o.items()} for o in stream(8, batch=2, seed=3)]
+        torch.testing.assert_close(run(policy, single)[:, 0], both[:, i], rtol=1e-4, atol=1e-5)
+
+
+def test_reset_clears_the_window():
+    policy = randomised_policy(er_iterations=2, er_window=4)
+    first = run(policy, stream(6, seed=4))
+    run(policy, stream(3, seed=5))
+    assert torch.equal(run(policy, stream(6, seed=4)), first)
+
+
+def test_padded_and_non_refresh_steps_contribute_nothing(trained_policy):
+    policy = trained_policy.train()
+    seq = policy.sequences
+    batch = {"episode_index": torch.tensor([0, 3, 6])}
+
+    def loss_and_grads():
+        policy.zero_grad()
+        loss, _ = policy.forward(batch)
+        loss.backward()
+        return loss.detach(), [p.grad.clone() for p in policy.parameters()]
+
+    reference = loss_and_grads()
+    saved = dataclasses.replace(seq, vision=seq.vision.clone(), state=seq.state.clone(), action=seq.action.clone())
+    steps = torch.arange(seq.vision.shape[1])
+    padded = steps[None, :] >= seq.length[:, None]
+    non_refresh = (steps % policy.config.visual_refresh_interval != 0)[None, :].expand_as(padded)
+    seq.vision[non_refresh | padded] = 100.0
+    seq.state[padded] = -50.0
+    seq.action[padded] = 0.9
+    perturbed = loss_and_grads()
+    assert torch.equal(reference[0], perturbed[0])
+    assert all(torch.equal(a, b) for a, b in zip(reference[1], perturbed[1], strict=True))
+    seq.vision[:, 4] += 1.0  # a fresh, valid step: now the loss must change
+    assert not torch.equal(loss_and_grads()[0], reference[0])
+    policy.sequences = saved
+    policy.eval()
+
+
+def test_posteriors_have_their_own_parameter_group(trained_policy):
+    groups = trained_policy.get_optim_params()
+    assert len(groups) == 2
+    assert sum(p.numel() for p in groups[0]["params"]) == 675_732
+    assert groups[1]["params"][0] is trained_policy.posterior_store.latents
+    assert groups[1]["lr"] == 1e-2 and groups[1]["weight_decay"] == 0.0
+    assert trained_policy.posterior_store.latents.shape == (8, 32, 256)
+    assert trained_policy.posterior_store.latents.abs().sum() > 0  # trained
+
+
+def test_save_and_load_reproduce_actions(trained_policy, tmp_path):
+    trained_policy.save_pretrained(tmp_path)
+    with safe_open(tmp_path / "model.safetensors", "pt") as f:
+        keys = list(f.keys())
+    assert keys and not any("posterior" in k for k in keys)  # never in the weights file
+    assert (tmp_path / POSTERIOR_STORE_FILE).is_file()  # but in the training checkpoint
+    loaded = PredVLAPolicy.from_pretrained(tmp_path)
+    assert loaded.posterior_store is None
+    obs = stream(12, seed=7)
+    assert torch.equal(run(trained_policy, obs), run(loaded, obs))
