@@ -4,6 +4,8 @@ import argparse
 import sys
 from pathlib import Path
 
+import datasets
+
 from lerobot_predvla.commands.fit_frontend import CONFIG_DEFAULTS, INPUT_ERRORS
 from lerobot_predvla.conversion import IMAGE_STORAGES, convert_suite
 
@@ -30,6 +32,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    datasets.disable_progress_bars()  # Our own bar counts frames; the per-episode Map bars are noise.
     try:
         summary = convert_suite(
             hdf5_root=args.hdf5_root,

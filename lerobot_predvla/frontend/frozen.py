@@ -74,5 +74,9 @@ class FrozenFrontend:
         return torch.cat(features, dim=-1)
 
     def encode_instructions(self, texts: Sequence[str]) -> torch.Tensor:
-        """Language features (N, language_dim) of instructions."""
-        return self.artefact.language.transform(torch.from_numpy(self.language(texts)))
+        """Language features (N, language_dim) of instructions, bit-identical for identical strings."""
+        unique = sorted(set(texts))
+        embeddings = torch.from_numpy(self.language(unique))
+        # Row by row: a matmul's rounding can depend on how many rows it has.
+        rows = {text: self.artefact.language.transform(e[None])[0] for text, e in zip(unique, embeddings, strict=True)}
+        return torch.stack([rows[t] for t in texts]) if texts else torch.zeros(0, self.artefact.language_dim)

@@ -44,10 +44,14 @@ class LanguageEncoder:
             print(f"[predvla] language encoder: {LANGUAGE_ENCODER_NAME} from {self.source}")
 
     def __call__(self, texts: Sequence[str]) -> np.ndarray:
-        """Embed instructions into float32 (N, 384); each distinct string is encoded once."""
+        """Embed instructions into float32 (N, 384); each distinct string is encoded once, on its own."""
         if not texts:
             return np.zeros((0, LANGUAGE_ENCODER_DIM), dtype=np.float32)
         unique = sorted(set(texts))
-        embeddings = self.model.encode(unique, batch_size=64, convert_to_numpy=True, show_progress_bar=False)
-        row = {text: i for i, text in enumerate(unique)}
-        return np.asarray(embeddings, dtype=np.float32)[[row[t] for t in texts]]
+        # One string per forward pass: padding within a batch perturbs the embedding in the last bits, and
+        # an instruction must map to the same features whatever it is encoded with.
+        rows = {
+            text: self.model.encode([text], convert_to_numpy=True, show_progress_bar=False)[0].astype(np.float32)
+            for text in unique
+        }
+        return np.stack([rows[t] for t in texts])

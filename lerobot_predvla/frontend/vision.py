@@ -78,9 +78,12 @@ def build_resnet18(weights: VisionWeights) -> nn.Module:
         path = Path(weights.path)
         if not path.is_file():
             raise VisionWeightsError(f"Vision weights file {path} does not exist.")
-        state = torch.load(path, map_location="cpu", weights_only=True)
-        state = {k: v for k, v in state.items() if not k.startswith("fc.")}
-        missing, unexpected = model.load_state_dict(state, strict=False)
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=True)
+            state = {k: v for k, v in state.items() if not k.startswith("fc.")}
+            missing, unexpected = model.load_state_dict(state, strict=False)
+        except Exception as err:  # Unpickling and shape errors come in many types.
+            raise VisionWeightsError(f"{path} is not a ResNet18 state dict: {err}") from err
         missing = [k for k in missing if not k.startswith("fc.")]
         if missing or unexpected:
             raise VisionWeightsError(
