@@ -16,9 +16,10 @@ def raw_images(num_frames: int, seed: int, size: int = IMAGE_SIZE) -> np.ndarray
     yy, xx = np.mgrid[0:size, 0:size] / size
     base = np.stack([xx, yy, 1 - xx * yy], axis=-1) * rng.uniform(80, 200, 3)
     frames = np.repeat(base[None], num_frames, axis=0)
+    side = size // 6
     for t in range(num_frames):
-        y, x = (int(v) for v in rng.integers(RAW_TOP_ROWS, size - 24, 2))
-        frames[t, y : y + 20, x : x + 20] = rng.uniform(0, 255, 3)
+        y, x = (int(v) for v in rng.integers(RAW_TOP_ROWS, size - side, 2))
+        frames[t, y : y + side, x : x + side] = rng.uniform(0, 255, 3)
     frames[:, :RAW_TOP_ROWS] = (255, 0, 0)
     return frames.astype(np.uint8)
 
