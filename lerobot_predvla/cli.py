@@ -11,6 +11,7 @@ import sys
 # Subcommand modules, in the order `predvla --help` lists them.
 SUBCOMMAND_MODULES = [
     "lerobot_predvla.commands.synthetic",
+    "lerobot_predvla.commands.demos",
     "lerobot_predvla.commands.fit_frontend",
     "lerobot_predvla.commands.convert",
 ]

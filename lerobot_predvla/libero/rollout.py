@@ -1,0 +1,62 @@
+"""Expert episodes rolled out without rendering; what is saved suffices to replay them exactly."""
+
+from dataclasses import dataclass
+from xml.etree import ElementTree
+
+import numpy as np
+
+from lerobot_predvla.libero.env import fixture_poses, random_reset
+from lerobot_predvla.libero.expert import ExpertFailure, ScriptedExpert
+
+SETTLE_STEPS = 5  # idle steps after reset so objects rest on their support (not recorded)
+STEP_CAPS = {"libero_spatial": 280, "libero_object": 280, "libero_goal": 300, "libero_10": 520}
+IDLE = np.array([0, 0, 0, 0, 0, 0, -1.0])
+
+
+@dataclass
+class Episode:
+    seed: int
+    actions: np.ndarray  # (N, 7) float64
+    states: np.ndarray  # (N, S) flattened MuJoCo state before each action
+    fixtures: dict[str, tuple[np.ndarray, np.ndarray]]  # fixture body -> (pos, wxyz quat)
+    model_xml: str  # the scene, fixture poses included
+    success: bool
+    note: str = ""
+
+
+def _model_xml(env, fixtures: dict[str, tuple[np.ndarray, np.ndarray]]) -> str:
+    """The loaded scene XML with this reset's fixture poses written into their bodies."""
+    root = ElementTree.fromstring(env.sim.model.get_xml())
+    for body in root.iter("body"):
+        if body.get("name") in fixtures:
+            pos, quat = fixtures[body.get("name")]
+            body.set("pos", " ".join(f"{v:.9g}" for v in pos))
+            body.set("quat", " ".join(f"{v:.9g}" for v in quat))
+    return ElementTree.tostring(root, encoding="unicode")
+
+
+def run_episode(env, seed: int, max_steps: int) -> Episode:
+    """Randomised reset (never an official init state), then the scripted expert until success."""
+    random_reset(env, seed)
+    for _ in range(SETTLE_STEPS):
+        env.step(IDLE)
+    fixtures = fixture_poses(env)
+    actions, states, success, note = [], [], False, ""
+    try:
+        expert = ScriptedExpert(env)
+        for _ in range(max_steps):
+            states.append(env.get_sim_state())
+            actions.append(expert.act())
+            env.step(actions[-1])
+            if env.check_success():
+                success = True
+                break
+            if expert.done:
+                note = "plan ended without success"
+                break
+        else:
+            note = f"step cap {max_steps} reached"
+    except ExpertFailure as err:
+        note = str(err)
+    return Episode(seed, np.asarray(actions, dtype=np.float64).reshape(-1, 7),
+                   np.asarray(states, dtype=np.float64), fixtures, _model_xml(env, fixtures), success, note)
