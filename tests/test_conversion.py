@@ -155,8 +155,8 @@ def test_simulator_route_gives_the_cached_features(png_dataset, libero, frontend
         obs = LiberoProcessorStep().observation(obs)
         live = frontend.encode_images({cam: obs[cam] for cam in CAMERAS})[0]
         cached = png_dataset[first + t][OBS_VISION_FEATURES]
-        # Only the batch size differs (1 here, the whole episode when caching): bf16 kernel rounding.
-        assert (live - cached).norm() / cached.norm() < 0.02
+        # Only the batch size differs (1 here, the whole episode when caching); measured 0 on x86 CPUs.
+        assert (live - cached).norm() / cached.norm() < 5e-3
 
 
 def test_video_storage(libero, frontend_dir, png_dataset, tmp_path):

@@ -172,7 +172,8 @@ def test_bf16_features_stay_close_to_fp32(frontend):
     bf16 = frontend.vision(images)
     basis = frontend.artefact.cameras["observation.images.image"]
     relative = (basis.transform(bf16) - basis.transform(fp32)).norm(dim=1) / basis.transform(fp32).norm(dim=1)
-    assert relative.max() < 0.03, relative  # Measured ~0.4-1% (README).
+    # Measured on these frames: median 1.3%, max 2.3% (0.4% before PCA); see the README.
+    assert relative.max() < 0.06, relative
 
 
 def test_vision_weights_are_explicit_and_verified(tmp_path, capsys):
