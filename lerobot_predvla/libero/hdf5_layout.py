@@ -32,6 +32,8 @@ def file_attrs(spec: TaskSpec, env) -> dict[str, str]:
     from robosuite import load_controller_config
 
     problem_info = get_problem_info(str(spec.bddl_file))
+    # The benchmark's instruction (what evaluation gives the policy); a few BDDL texts differ from it.
+    problem_info["language_instruction"] = spec.language
     kwargs = {
         **env_kwargs(spec, render=True),
         "bddl_file_name": spec.bddl_relpath,
