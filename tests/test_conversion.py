@@ -2,7 +2,6 @@
 
 import argparse
 import json
-import os
 from pathlib import Path
 
 import h5py
@@ -21,8 +20,6 @@ from lerobot_predvla.configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VIS
 from lerobot_predvla.frontend import CAMERAS, FrontendArtefact, FrozenFrontend, LiberoDataError
 from lerobot_predvla.frontend.libero_hdf5 import scan_file
 from lerobot_predvla.frontend.preprocessing import libero_hdf5_to_lerobot
-
-os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 SOUP = "pick up the alphabet soup and place it in the basket"
 MILK = "pick up the milk and place it in the basket"

@@ -2,7 +2,6 @@
 
 import argparse
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +27,6 @@ from lerobot_predvla.frontend import (
 from lerobot_predvla.frontend.artefact import METADATA_FILE, TENSORS_FILE
 from lerobot_predvla.frontend.pca import fit_pca
 from lerobot_predvla.frontend.vision import VisionEncoder, build_resnet18, module_fingerprint
-
-os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 INSTRUCTIONS = ["pick up the alphabet soup and place it in the basket", "open the top drawer of the cabinet",
                 "put the bowl on the plate"]
