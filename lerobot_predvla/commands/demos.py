@@ -28,7 +28,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--per-task", type=int, default=10, help="successful demonstrations per task")
     p.add_argument("--max-attempts", type=int, default=None, help="episodes tried per task (default 3x)")
     p.add_argument("--max-steps", type=int, default=None, help="step cap per episode (default: suite cap)")
-    p.add_argument("--out", type=Path, required=True, help="root folder; files go to OUT/SUITE/")
+    p.add_argument("--out", type=Path, default=None, help="root folder; files go to OUT/SUITE/")
+    p.add_argument("--no-render", action="store_true",
+                   help="only measure expert success: no rendering, no files (then --out is not needed)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 
@@ -45,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.per_task < 1:
         raise SystemExit("--per-task must be >= 1")
+    if args.out is None and not args.no_render:
+        raise SystemExit("--out is required (or pass --no-render to only measure expert success)")
     task_ids = args.tasks if args.tasks is not None else list(range(num_tasks(args.suite)))
     max_attempts = args.max_attempts or 3 * args.per_task
     max_steps = args.max_steps or STEP_CAPS[args.suite]
@@ -67,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         env.close()
         t_roll = time.time() - t0
         demos = []
-        if kept:
+        if kept and not args.no_render:
             render_env = make_env(spec, render=True)
             random_reset(render_env, 0)
             attrs = file_attrs(spec, render_env)

@@ -88,31 +88,57 @@ class ScriptedExpert:
             yield self._action(pos, yaw_dir, grip)
 
     # Skills ----------------------------------------------------------------------------------------
-    def _grasp_pose(self, name: str) -> tuple[np.ndarray, np.ndarray | None]:
-        """Fingertip target and finger direction for a top-down grasp of object `name`."""
-        box, eef = self.view.box(name), self.view.eef_pos()
+    def _grasp_pose(self, name: str, radial: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Fingertip target and finger direction for a top-down grasp of object `name`.
+
+        Objects wider than the fingers' span (bowls) are grasped at the rim point along `radial`.
+        """
+        box = self.view.box(name)
         if box.short <= MAX_FINGER_SPAN:
             # Narrow side between the fingers; round objects keep the current yaw.
             yaw = box.short_dir if box.long - box.short > 0.01 else None
             z = max(box.bottom + box.height / 2, box.top - 0.035)
             return np.array([box.center[0], box.center[1], z]), yaw
-        # Too wide (bowls): grasp the rim nearest the gripper, fingers across the rim.
-        radial = eef[:2] - box.center[:2]
-        radial /= np.linalg.norm(radial) + 1e-9
         xy = box.center[:2] + radial * (box.short / 2 - 0.012)
         return np.array([xy[0], xy[1], box.top - 0.02]), radial
+
+    def _rim_direction(self, name: str) -> np.ndarray | None:
+        """For wide objects: the rim side with most room for the outer finger, preferring the robot side."""
+        v = self.view
+        box = v.box(name)
+        if box.short <= MAX_FINGER_SPAN:
+            return None
+        others = []
+        for other in [*v.inner.objects_dict, *v.inner.fixtures_dict]:
+            if other == name:
+                continue
+            ob = v.box(other)
+            supports = np.all(ob.low[:2] <= box.center[:2]) and np.all(box.center[:2] <= ob.high[:2])
+            if not supports and ob.top > box.bottom + 0.005:
+                others.append(ob)
+        best, best_score = None, -np.inf
+        for angle in np.linspace(-np.pi, np.pi, 24, endpoint=False):
+            radial = np.array([np.cos(angle), np.sin(angle)])
+            finger = box.center[:2] + radial * (box.short / 2 + 0.015)
+            gaps = [np.linalg.norm(np.maximum(0, np.maximum(ob.low[:2] - finger, finger - ob.high[:2])))
+                    for ob in others]
+            score = min([0.04, *gaps]) - 0.01 * radial[0]  # the robot stands at -x
+            if score > best_score:
+                best, best_score = radial, score
+        return best
 
     def _pick(self, name: str, lift_z: float) -> Skill:
         for _attempt in range(3):
             start_z = self.view.box(name).bottom
             hover = max(self.view.box(name).top + 0.08, self.view.eef_pos()[2])
+            radial = self._rim_direction(name)
 
-            def above(h: float = hover):
-                pos, yaw = self._grasp_pose(name)
+            def above(h: float = hover, r: np.ndarray | None = radial):
+                pos, yaw = self._grasp_pose(name, r)
                 return np.array([pos[0], pos[1], h]), yaw
 
-            yield from self._move(above, OPEN, tol=0.015, max_steps=80)
-            yield from self._move(lambda: self._grasp_pose(name), OPEN, tol=0.006, max_steps=50,
+            yield from self._move(above, OPEN, tol=0.01, max_steps=80)
+            yield from self._move(lambda r=radial: self._grasp_pose(name, r), OPEN, tol=0.006, max_steps=50,
                                   max_speed=0.6)
             yield from self._hold(CLOSE, 12)
             eef = self.view.eef_pos()
