@@ -108,6 +108,11 @@ class PredVLAPolicy(PreTrainedPolicy):
     # ----- training ------------------------------------------------------------------------------------
     def forward(self, batch: dict[str, Tensor], reduction: str = "mean") -> tuple[Tensor, dict]:
         """Training loss of Eq. 10 on whole episodes of the batch's `episode_index`."""
+        if reduction != "mean":
+            raise NotImplementedError(
+                f"PredVLA's loss is a mask-normalised mean over whole episodes (Eq. 10); reduction={reduction!r} "
+                "(per-sample weighting in lerobot-train) is not supported."
+            )
         if self.sequences is None or self.posterior_store is None:
             raise RuntimeError(
                 "PredVLAPolicy.forward needs the training dataset: build the policy with `dataset_meta` "
