@@ -91,10 +91,11 @@ class ScriptedExpert:
     def _grasp_pose(self, name: str, radial: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Fingertip target and finger direction for a top-down grasp of object `name`.
 
-        Objects wider than the fingers' span (bowls) are grasped at the rim point along `radial`.
+        With a `radial` direction (objects wider than the fingers' span, e.g. bowls) the grasp is at
+        the rim point along it; the choice is made once per attempt by `_rim_direction`.
         """
         box = self.view.box(name)
-        if box.short <= MAX_FINGER_SPAN:
+        if radial is None:
             # Narrow side between the fingers; round objects keep the current yaw.
             yaw = box.short_dir if box.long - box.short > 0.01 else None
             z = max(box.bottom + box.height / 2, box.top - 0.035)
