@@ -69,8 +69,7 @@ class ErrorRegression:
         self.fresh.append(fresh)
         if len(self.posteriors) > cfg.er_window:  # slide: the oldest posterior is final
             with torch.no_grad():
-                u = tuple(model.latent[m](c) for m, c in enumerate(self.posteriors[0].chunk(4, dim=-1)))
-                self.start_state = model.step(self.start_state, self.lang_term, u)[0]
+                self.start_state = model.rollout(self.start_state, self.lang_term, self.posteriors[0][None]).final
             for buffer in (self.posteriors, self.vision, self.proprio, self.fresh):
                 del buffer[0]
         return None

@@ -88,22 +88,18 @@ class PredVLAPolicy(PreTrainedPolicy):
 
     @classmethod
     def _load_as_safetensor(cls, model: "PredVLAPolicy", model_file: str, map_location: str, strict: bool):
-        state = load_file(model_file, device="cpu")
-        missing, unexpected = model.load_state_dict(state, strict=False)
-        missing = [k for k in missing if not k.startswith("posterior_store.")]
-        if missing or unexpected:
-            raise ValueError(f"{model_file}: missing keys {missing}, unexpected keys {unexpected}.")
+        model.load_state_dict(load_file(model_file, device="cpu"))
         if model.posterior_store is not None:  # resuming training: restore the posteriors too
             model.posterior_store.load(Path(model_file).parent)
         return model
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
-        if strict and self.posterior_store is not None:
-            missing = [k for k in self.model.state_dict() if f"model.{k}" not in state_dict]
-            if missing:
-                raise KeyError(f"Missing network keys: {missing}")
-            strict = False
-        return super().load_state_dict(state_dict, strict=strict, assign=assign)
+        """Strict on the network; the posteriors are optional since they never enter the weights file."""
+        missing, unexpected = super().load_state_dict(state_dict, strict=False, assign=assign)
+        missing = [k for k in missing if not k.startswith("posterior_store.")]
+        if strict and (missing or unexpected):
+            raise KeyError(f"PredVLA state dict: missing keys {missing}, unexpected keys {unexpected}.")
+        return torch.nn.modules.module._IncompatibleKeys(missing, unexpected)
 
     # ----- training ------------------------------------------------------------------------------------
     def forward(self, batch: dict[str, Tensor], reduction: str = "mean") -> tuple[Tensor, dict]:
