@@ -73,6 +73,9 @@ class PredVLAConfig(PreTrainedConfig):
             (Table 2: 1.0).
         er_lambda_v: Visual prediction-error weight during error regression (1; 0 is ablation A4).
         er_lambda_q: Proprioceptive prediction-error weight during error regression (1; 0 is A5).
+        use_bottleneck: Keep the visual-to-action bottleneck V -> A_top (Eq. 5); False is ablation A2.
+        use_efference_copy: Keep the efference copy A -> V of the model's own previous action and
+            proprioception predictions (Eq. 6); False is ablation A3.
     """
 
     # Front end (Table 1).
@@ -93,6 +96,8 @@ class PredVLAConfig(PreTrainedConfig):
     num_mixtures: int = 5
     min_action_scale: float = 0.05
     tau: tuple[float, float, float, float] = SHORT_HORIZON_TAU
+    use_bottleneck: bool = True
+    use_efference_copy: bool = True
 
     # Training (Table 2).
     sequence_length: int = 200

@@ -102,12 +102,14 @@ class PredictiveModel(nn.Module):
         self.latent = nn.ModuleList([nn.Linear(r, d, bias=False) for d in dims])
         self.bias = nn.ParameterList([nn.Parameter(torch.zeros(d)) for d in dims])
         self.lang = nn.Linear(config.language_dim, d_t, bias=False)  # W_lang (Eq. 4)
-        # Eq. 5: visual-to-action bottleneck z = W_VA d^V, beta^{A_top} = W_top z.
-        self.bottleneck_in = nn.Linear(d_v, config.bottleneck_dim, bias=False)
-        self.bottleneck_out = nn.Linear(config.bottleneck_dim, d_at, bias=False)
-        # Eq. 6: efference copy beta^V = W_ba a_hat_{t-1} + W_bq q_hat_{t-1}.
-        self.efference_a = nn.Linear(config.action_dim, d_v, bias=False)
-        self.efference_q = nn.Linear(config.proprio_dim, d_v, bias=False)
+        # Eq. 5: visual-to-action bottleneck z = W_VA d^V, beta^{A_top} = W_top z (absent in ablation A2).
+        if config.use_bottleneck:
+            self.bottleneck_in = nn.Linear(d_v, config.bottleneck_dim, bias=False)
+            self.bottleneck_out = nn.Linear(config.bottleneck_dim, d_at, bias=False)
+        # Eq. 6: efference copy beta^V = W_ba a_hat_{t-1} + W_bq q_hat_{t-1} (absent in ablation A3).
+        if config.use_efference_copy:
+            self.efference_a = nn.Linear(config.action_dim, d_v, bias=False)
+            self.efference_q = nn.Linear(config.proprio_dim, d_v, bias=False)
         # Decoders.
         self.v_head = mlp(d_v, config.head_hidden_dim, config.vision_dim)
         self.q_head = mlp(d_ab, config.head_hidden_dim, config.proprio_dim)
@@ -161,13 +163,15 @@ class PredictiveModel(nn.Module):
 
         h_t = self._leaky(T, h_t, self.rec[T](d_t) + latent(T, d_t) + lang_term + self.bias[T])
         d_t = torch.tanh(h_t)
-        beta_v = self.efference_a(state.a_hat) + self.efference_q(state.q_hat)
-        h_v = self._leaky(V, h_v, self.rec[V](d_v) + self.td[0](d_t) + latent(V, d_t) + beta_v + self.bias[V])
+        pre_v = self.rec[V](d_v) + self.td[0](d_t) + latent(V, d_t) + self.bias[V]
+        if self.config.use_efference_copy:
+            pre_v = pre_v + self.efference_a(state.a_hat) + self.efference_q(state.q_hat)
+        h_v = self._leaky(V, h_v, pre_v)
         d_v = torch.tanh(h_v)
-        beta_at = self.bottleneck_out(self.bottleneck_in(d_v))
-        h_at = self._leaky(
-            A_TOP, h_at, self.rec[A_TOP](d_at) + self.td[1](d_t) + latent(A_TOP, d_t) + beta_at + self.bias[A_TOP]
-        )
+        pre_at = self.rec[A_TOP](d_at) + self.td[1](d_t) + latent(A_TOP, d_t) + self.bias[A_TOP]
+        if self.config.use_bottleneck:
+            pre_at = pre_at + self.bottleneck_out(self.bottleneck_in(d_v))
+        h_at = self._leaky(A_TOP, h_at, pre_at)
         d_at = torch.tanh(h_at)
         h_ab = self._leaky(
             A_BOTTOM, h_ab, self.rec[A_BOTTOM](d_ab) + self.td[2](d_at) + latent(A_BOTTOM, d_at) + self.bias[A_BOTTOM]
