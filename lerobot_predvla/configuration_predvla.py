@@ -74,6 +74,10 @@ class PredVLAConfig(PreTrainedConfig):
         er_lambda_v: Visual prediction-error weight during error regression (1; 0 is ablation A4).
         er_lambda_q: Proprioceptive prediction-error weight during error regression (1; 0 is A5).
         use_bottleneck: Keep the visual-to-action bottleneck V -> A_top (Eq. 5); False is ablation A2.
+        frontend_dir: Front-end artefact (`predvla fit-frontend`) that encodes live observations at
+            evaluation. None: the training dataset's copy (`meta/predvla_frontend`, written by `predvla
+            convert`) when there is one. Its contents are stored in the checkpoint's preprocessor, so
+            evaluation never reads this path.
         use_efference_copy: Keep the efference copy A -> V of the model's own previous action and
             proprioception predictions (Eq. 6); False is ablation A3.
     """
@@ -98,6 +102,7 @@ class PredVLAConfig(PreTrainedConfig):
     tau: tuple[float, float, float, float] = SHORT_HORIZON_TAU
     use_bottleneck: bool = True
     use_efference_copy: bool = True
+    frontend_dir: str | None = None
 
     # Training (Table 2).
     sequence_length: int = 200

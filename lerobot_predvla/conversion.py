@@ -15,6 +15,7 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 from tqdm import tqdm
 
 from lerobot_predvla.configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.frontend.artefact import FRONTEND_META_DIR
 from lerobot_predvla.frontend.frozen import FrozenFrontend
 from lerobot_predvla.frontend.libero_hdf5 import CAMERAS, DemoRef, read_demo, scan_suites
 from lerobot_predvla.frontend.preprocessing import libero_hdf5_to_lerobot
@@ -23,7 +24,6 @@ LIBERO_FPS = 20
 IMAGE_STORAGES = ("video", "png")
 STATE_NAMES = [*(f"joint_{i}" for i in range(7)), "gripper_0", "gripper_1"]
 ACTION_NAMES = ["x", "y", "z", "roll", "pitch", "yaw", "gripper"]
-FRONTEND_META_DIR = "meta/predvla_frontend"  # Copy of the artefact, for provenance.
 
 
 @dataclass

@@ -10,6 +10,7 @@ from torch import Tensor
 
 from .configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, PredVLAConfig
 from .error_regression import ErrorRegression
+from .frontend.artefact import FRONTEND_META_DIR
 from .posterior_store import PosteriorStore
 from .predictive_model import PredictiveModel
 from .sequence_table import EpisodeSequences
@@ -40,6 +41,10 @@ class PredVLAPolicy(PreTrainedPolicy):
         self.sequences: EpisodeSequences | None = None
         self.posterior_store: PosteriorStore | None = None
         if dataset_meta is not None:
+            frontend = Path(dataset_meta.root) / FRONTEND_META_DIR
+            if config.frontend_dir is None and frontend.is_dir():
+                # Read by make_predvla_pre_post_processors, which lerobot-train calls after building the policy.
+                config.frontend_dir = str(frontend)
             self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
             self.posterior_store = PosteriorStore(
                 self.sequences.vision.shape[0], config.sequence_length, self.model.posterior_dim

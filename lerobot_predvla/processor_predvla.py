@@ -15,6 +15,19 @@ from lerobot.processor import (
 from lerobot.processor.factory import make_policy_processor_pipelines
 
 from .configuration_predvla import PredVLAConfig
+from .frontend.artefact import FrontendArtefact
+from .frontend.processor_step import FrontendProcessorStep
+
+
+def frontend_step(config: PredVLAConfig) -> FrontendProcessorStep:
+    """The frozen front end of `config.frontend_dir`, or a pass-through step for cached features only."""
+    if config.frontend_dir is None:
+        return FrontendProcessorStep()
+    artefact = FrontendArtefact.load(config.frontend_dir)
+    artefact.check_dims(
+        config.language_dim, config.vision_dim_per_camera, list(artefact.cameras), config.frontend_dir
+    )
+    return FrontendProcessorStep.from_artefact(artefact)
 
 
 def make_predvla_pre_post_processors(
@@ -24,15 +37,18 @@ def make_predvla_pre_post_processors(
     PolicyProcessorPipeline[dict[str, Any], dict[str, Any]],
     PolicyProcessorPipeline[PolicyAction, PolicyAction],
 ]:
-    """Input: rename -> batch dim -> device -> normalise. Output: unnormalise actions -> cpu.
+    """Input: rename -> batch dim -> front end -> device -> normalise. Output: unnormalise -> cpu.
 
-    The inputs are the cached front-end features: PCA outputs and raw proprioception pass through
+    The front-end step turns live environment observations into the cached features (training batches
+    already have them) and carries the artefact of `config.frontend_dir` into the checkpoint. The inputs
+    are the cached front-end features: PCA outputs and raw proprioception pass through
     unchanged (identity, Section 3.1); actions are min-max scaled to the [-1, 1] range of the tanh
     component means and scaled back on the way out.
     """
     input_steps = [
         RenameObservationsProcessorStep(rename_map={}),
         AddBatchDimensionProcessorStep(),
+        frontend_step(config),
         DeviceProcessorStep(device=config.device),
         NormalizerProcessorStep(
             features={**config.input_features, **config.output_features},

@@ -5,6 +5,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from safetensors.numpy import load_file, save_file
 
 from lerobot_predvla.frontend.language import LANGUAGE_ENCODER_DIM, LANGUAGE_ENCODER_NAME
@@ -15,6 +16,7 @@ from lerobot_predvla.frontend.vision import VISION_ENCODER_DIM, VISION_ENCODER_N
 TENSORS_FILE = "frontend.safetensors"
 METADATA_FILE = "frontend.json"
 FORMAT = "predvla-frontend"
+FRONTEND_META_DIR = "meta/predvla_frontend"  # the copy a converted dataset carries
 FORMAT_VERSION = 1
 _ARRAYS = ("mean", "components", "explained_variance", "explained_variance_ratio")
 
@@ -99,12 +101,15 @@ class FrontendArtefact:
             "fit": self.fit,
         }
 
+    def tensors(self) -> dict[str, np.ndarray]:
+        """The PCA arrays, keyed `<basis>/<array>` (what `frontend.safetensors` holds)."""
+        return {f"{name}/{array}": getattr(basis, array) for name, basis in self._bases().items() for array in _ARRAYS}
+
     def save(self, directory: Path | str) -> Path:
         """Write both files into `directory` (each replaced atomically)."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
-        tensors = {f"{name}/{array}": getattr(basis, array) for name, basis in self._bases().items()
-                   for array in _ARRAYS}
+        tensors = self.tensors()
         for file, write in (
             (TENSORS_FILE, lambda p: save_file(tensors, p, metadata={"format": FORMAT})),
             (METADATA_FILE, lambda p: Path(p).write_text(json.dumps(self.metadata(), indent=2) + "\n")),
@@ -126,14 +131,21 @@ class FrontendArtefact:
             tensors = load_file(str(tensor_path))
         except Exception as err:  # json and safetensors raise various types on corrupt files.
             raise FrontendArtefactError(f"{directory}: unreadable front-end artefact ({err}).") from err
+        return cls.from_metadata(meta, tensors, where=directory)
+
+    @classmethod
+    def from_metadata(
+        cls, meta: dict, tensors: dict[str, np.ndarray], where: Path | str
+    ) -> "FrontendArtefact":
+        """Rebuild an artefact from its JSON description and arrays (`where` names the source in errors)."""
         if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
-            raise FrontendArtefactError(f"{meta_path}: not a {FORMAT} v{FORMAT_VERSION} artefact.")
+            raise FrontendArtefactError(f"{where}: not a {FORMAT} v{FORMAT_VERSION} artefact.")
 
         def basis(name: str, info: dict) -> PCABasis:
             try:
-                arrays = {array: tensors[f"{name}/{array}"] for array in _ARRAYS}
+                arrays = {array: np.asarray(tensors[f"{name}/{array}"]) for array in _ARRAYS}
             except KeyError as err:
-                raise FrontendArtefactError(f"{tensor_path}: missing tensor {err}.") from err
+                raise FrontendArtefactError(f"{where}: missing tensor {err}.") from err
             return PCABasis(**arrays, components_with_variance=info["components_with_variance"],
                             num_samples=info["num_samples"])
 

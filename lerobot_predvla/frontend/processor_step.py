@@ -1,0 +1,121 @@
+"""The frozen front end as a LeRobot processor step: live observations -> PredVLA's cached features."""
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+from lerobot.configs.types import FeatureType, PipelineFeatureType, PolicyFeature
+from lerobot.lerobot_types import EnvTransition, TransitionKey
+from lerobot.processor import ProcessorStep, ProcessorStepRegistry
+
+from lerobot_predvla.configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.frontend.artefact import FrontendArtefact, FrontendArtefactError
+from lerobot_predvla.frontend.frozen import FrozenFrontend
+
+# Set by the `predvla_libero` environment: 1 where the step's camera images are freshly rendered.
+OBS_IMAGE_FRESH = "observation.image_fresh"
+
+
+@ProcessorStepRegistry.register("predvla_frontend_processor")
+@dataclass
+class FrontendProcessorStep(ProcessorStep):
+    """Encode camera images and the task string with the checkpoint's own frozen front end.
+
+    Training batches already carry the converter's cached columns and pass through untouched. From an
+    environment (`lerobot-eval`), images go through the same preprocessing, ResNet18 and PCA bases as in
+    `predvla convert`, and the task string through all-MiniLM-L6-v2 and its PCA basis. Images are encoded
+    only where the environment marks them fresh (`observation.image_fresh`, every
+    `visual_refresh_interval` control steps with `--env.type=predvla_libero`); in between the last visual
+    features are repeated, which the policy masks out of the free energy (Eq. 9). Without the mark every
+    step is encoded.
+
+    The artefact's JSON description is this step's config and its PCA arrays are its state, so the front
+    end is saved with every checkpoint (`policy_preprocessor*.json/.safetensors`) and pushed with it.
+
+    Args:
+        artefact: JSON description of the front-end artefact (`frontend.json`); None for a policy trained
+            on data without one (it can then only consume cached features).
+        device: Torch device of the encoders.
+    """
+
+    artefact: dict | None = None
+    device: str = "cpu"
+    _arrays: dict[str, np.ndarray] = field(default_factory=dict, init=False, repr=False)
+    _frontend: FrozenFrontend | None = field(default=None, init=False, repr=False)
+    _vision: torch.Tensor | None = field(default=None, init=False, repr=False)
+    _language: dict[str, torch.Tensor] = field(default_factory=dict, init=False, repr=False)
+
+    @classmethod
+    def from_artefact(cls, artefact: FrontendArtefact, device: str = "cpu") -> "FrontendProcessorStep":
+        step = cls(artefact=artefact.metadata(), device=device)
+        step._arrays = artefact.tensors()
+        return step
+
+    def get_config(self) -> dict[str, Any]:
+        return {"artefact": self.artefact, "device": self.device}
+
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        return {key: torch.from_numpy(np.ascontiguousarray(a)) for key, a in self._arrays.items()}
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        self._arrays = {key: t.cpu().numpy() for key, t in state.items()}
+        self._frontend = None
+
+    def reset(self) -> None:
+        self._vision = None
+
+    def frontend(self) -> FrozenFrontend:
+        """The encoders, built on first use (seconds) and checked against the artefact's fingerprints."""
+        if self._frontend is None:
+            if self.artefact is None:
+                raise FrontendArtefactError(
+                    "This PredVLA checkpoint has no front-end artefact, so it can only consume the cached "
+                    f"'{OBS_VISION_FEATURES}' / '{OBS_LANGUAGE_FEATURES}' columns. Train on a dataset written by "
+                    "`predvla convert` (it carries meta/predvla_frontend) or pass --policy.frontend_dir."
+                )
+            artefact = FrontendArtefact.from_metadata(self.artefact, self._arrays, where="policy_preprocessor")
+            self._frontend = FrozenFrontend(artefact, device=self.device)
+        return self._frontend
+
+    def __call__(self, transition: EnvTransition) -> EnvTransition:
+        observation = transition.get(TransitionKey.OBSERVATION)
+        if observation is None or OBS_VISION_FEATURES in observation:
+            return transition  # training batch: cached columns from the converter
+        frontend = self.frontend()
+        fresh = observation.get(OBS_IMAGE_FRESH)
+        if self._vision is None or fresh is None or bool(torch.as_tensor(fresh).any()):
+            missing = [key for key in frontend.artefact.cameras if key not in observation]
+            if missing:
+                raise KeyError(
+                    f"PredVLA's front end needs the camera images {missing}; the observation has "
+                    f"{sorted(observation)}. Evaluate with --env.type=predvla_libero."
+                )
+            images = {key: observation[key] for key in frontend.artefact.cameras}
+            with torch.no_grad():
+                self._vision = frontend.encode_images(images)
+        tasks = (transition.get(TransitionKey.COMPLEMENTARY_DATA) or {}).get("task")
+        if tasks is None:
+            raise KeyError("PredVLA's front end needs the task instruction ('task') to compute language features.")
+        tasks = [tasks] if isinstance(tasks, str) else list(tasks)
+        for text in set(tasks) - set(self._language):
+            self._language[text] = frontend.encode_instructions([text])[0]
+        new_observation = dict(observation)
+        new_observation[OBS_VISION_FEATURES] = self._vision
+        new_observation[OBS_LANGUAGE_FEATURES] = torch.stack([self._language[t] for t in tasks])
+        new_transition = dict(transition)
+        new_transition[TransitionKey.OBSERVATION] = new_observation
+        return new_transition
+
+    def transform_features(
+        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
+    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
+        if self.artefact is None:
+            return features
+        observation = dict(features.get(PipelineFeatureType.OBSERVATION, {}))
+        vision_dim = sum(cam["n_components"] for cam in self.artefact["vision"]["cameras"].values())
+        observation[OBS_VISION_FEATURES] = PolicyFeature(type=FeatureType.STATE, shape=(vision_dim,))
+        observation[OBS_LANGUAGE_FEATURES] = PolicyFeature(
+            type=FeatureType.STATE, shape=(self.artefact["language"]["n_components"],)
+        )
+        return {**features, PipelineFeatureType.OBSERVATION: observation}
