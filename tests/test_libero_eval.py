@@ -1,0 +1,85 @@
+"""Real `lerobot-eval` of a tiny PredVLA checkpoint on LIBERO (`--env.type=predvla_libero`).
+
+The checkpoint is trained for two steps on a converted dataset whose front end was fitted offline
+(`--vision-weights random`); the evaluation runs the simulator for one truncated episode.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from libero_factory import write_libero_file
+from test_conversion import SUITE, convert, run_cli
+
+from lerobot_predvla.configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.frontend import FrontendArtefact, FrozenFrontend
+from lerobot_predvla.frontend.processor_step import OBS_IMAGE_FRESH, FrontendProcessorStep
+
+BIN = Path(sys.executable).parent
+SOUP = "pick up the alphabet soup and place it in the basket"  # libero_object task 0
+EPISODE_STEPS = 9
+
+
+def run(cmd: list[str]) -> str:
+    result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    return result.stdout + result.stderr
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("eval")
+    write_libero_file(root / "hdf5" / SUITE / "soup_demo.hdf5", SOUP, [12, 10], seed=4)
+    frontend = root / "frontend"
+    assert run_cli(["fit-frontend", "--hdf5-root", str(root / "hdf5"), "--suites", SUITE,
+                    "--vision-weights", "random", "--out", str(frontend)]) == 0
+    dataset = root / "dataset"
+    assert convert(root / "hdf5", frontend, dataset, "--image-storage", "png", "--repo-id", "local/soup") == 0
+    run([str(BIN / "lerobot-train"), "--policy.type=predvla", "--dataset.repo_id=local/soup",
+         f"--dataset.root={dataset}", "--policy.push_to_hub=false", "--policy.device=cpu", "--num_workers=0",
+         "--steps=2", "--save_freq=2", "--batch_size=2", "--wandb.enable=false", "--policy.sequence_length=16",
+         "--policy.er_window=4", "--policy.er_iterations=2", f"--output_dir={root / 'train'}"])
+    return root / "train" / "checkpoints" / "000002" / "pretrained_model"
+
+
+def test_checkpoint_carries_the_front_end(checkpoint):
+    config = json.loads((checkpoint / "policy_preprocessor.json").read_text())
+    step = next(s for s in config["steps"] if s["registry_name"] == "predvla_frontend_processor")
+    dataset_copy = FrontendArtefact.load(Path(json.loads((checkpoint / "config.json").read_text())["frontend_dir"]))
+    assert step["config"]["artefact"] == json.loads(json.dumps(dataset_copy.metadata()))
+    assert step["state_file"] and (checkpoint / step["state_file"]).is_file()
+
+
+def test_front_end_step_encodes_fresh_images_only(checkpoint):
+    from lerobot.processor import PolicyProcessorPipeline
+
+    pipeline = PolicyProcessorPipeline.from_pretrained(checkpoint, config_filename="policy_preprocessor.json")
+    step = next(s for s in pipeline.steps if isinstance(s, FrontendProcessorStep))
+    frontend = FrozenFrontend(step.frontend().artefact, verbose=False)
+    rng = np.random.default_rng(0)
+    images = [{k: torch.from_numpy(rng.random((1, 3, 128, 128), dtype=np.float32)) for k in frontend.artefact.cameras}
+              for _ in range(2)]
+    out = []
+    for image, fresh in zip(images, (1.0, 0.0), strict=True):
+        batch = {**image, "observation.state": torch.zeros(1, 9), OBS_IMAGE_FRESH: torch.tensor([[fresh]]),
+                 "task": [SOUP]}
+        out.append(pipeline(batch))
+    expected = frontend.encode_images(images[0])
+    torch.testing.assert_close(out[0][OBS_VISION_FEATURES], expected, rtol=0, atol=0)
+    torch.testing.assert_close(out[1][OBS_VISION_FEATURES], expected, rtol=0, atol=0)  # not refreshed
+    torch.testing.assert_close(out[0][OBS_LANGUAGE_FEATURES], frontend.encode_instructions([SOUP]), rtol=0, atol=0)
+
+
+def test_lerobot_eval_runs_predvla_on_libero(checkpoint, tmp_path):
+    log = run([str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", "--env.type=predvla_libero",
+               f"--env.task={SUITE}", "--env.task_ids=[0]", f"--env.episode_length={EPISODE_STEPS}",
+               "--eval.n_episodes=1", "--eval.batch_size=1", "--eval.use_async_envs=false", "--policy.device=cpu",
+               f"--output_dir={tmp_path}"])
+    info = json.loads((tmp_path / "eval_info.json").read_text())
+    assert info["overall"]["n_episodes"] == 1, log[-2000:]
+    assert 0.0 <= info["overall"]["pc_success"] <= 100.0
