@@ -10,10 +10,14 @@ import sys
 
 # Subcommand modules, in the order `predvla --help` lists them.
 SUBCOMMAND_MODULES = [
+    "lerobot_predvla.commands.libero_demo",
     "lerobot_predvla.commands.synthetic",
     "lerobot_predvla.commands.demos",
     "lerobot_predvla.commands.fit_frontend",
     "lerobot_predvla.commands.convert",
+    "lerobot_predvla.commands.sweep",
+    "lerobot_predvla.commands.report",
+    "lerobot_predvla.commands.push",
 ]
 
 
