@@ -143,13 +143,14 @@ class PredictiveModel(nn.Module):
         return (1.0 - a) * h + a * torch.tanh(pre)  # Eqs. 3-4
 
     def step(
-        self, state: RecurrentState, lang_term: Tensor, u: tuple[Tensor, ...] | None
+        self, state: RecurrentState, lang_term: Tensor, u: tuple[Tensor, ...] | None, extra_ab: Tensor | None = None
     ) -> tuple[RecurrentState, tuple[Tensor, Tensor, Tensor], Tensor | None]:
         """Advance one control step.
 
         `u` holds U^l c^l_{q,t} per module. With `u=None` every posterior is set to its prior, computed on
-        the fly in module order (error regression's newest step, and exact open loop). Returns the new
-        state, the GMM parameters and, when `u` was None, the posteriors used (= priors).
+        the fly in module order (error regression's newest step, and exact open loop). `extra_ab`, if given,
+        is added to A_bottom's pre-activation. Returns the new state, the GMM parameters and, when `u` was
+        None, the posteriors used (= priors).
         """
         (h_t, h_v, h_at, h_ab), (d_t, d_v, d_at, d_ab) = state.h, state.d
         used = []
@@ -173,23 +174,36 @@ class PredictiveModel(nn.Module):
             pre_at = pre_at + self.bottleneck_out(self.bottleneck_in(d_v))
         h_at = self._leaky(A_TOP, h_at, pre_at)
         d_at = torch.tanh(h_at)
-        h_ab = self._leaky(
-            A_BOTTOM, h_ab, self.rec[A_BOTTOM](d_ab) + self.td[2](d_at) + latent(A_BOTTOM, d_at) + self.bias[A_BOTTOM]
-        )
+        pre_ab = self.rec[A_BOTTOM](d_ab) + self.td[2](d_at) + latent(A_BOTTOM, d_at) + self.bias[A_BOTTOM]
+        if extra_ab is not None:
+            pre_ab = pre_ab + extra_ab
+        h_ab = self._leaky(A_BOTTOM, h_ab, pre_ab)
         d_ab = torch.tanh(h_ab)
         q_hat, a_hat, params = self._efference(d_ab)
         new_state = RecurrentState((h_t, h_v, h_at, h_ab), (d_t, d_v, d_at, d_ab), a_hat, q_hat)
         return new_state, params, (torch.cat(used, dim=-1) if u is None else None)
 
-    def rollout(self, state: RecurrentState, lang_term: Tensor, c_q: Tensor) -> Trajectory:
-        """Regenerate the states over a sequence from posteriors c_q of shape (time, batch, 4r)."""
-        # U^l c^l_q for all steps at once; `unbind` avoids the T^2 backward of indexing in the loop.
-        per_module = c_q.chunk(4, dim=-1)
-        u_seq = list(zip(*(self.latent[m](per_module[m]).unbind(0) for m in range(4)), strict=True))
+    def rollout(
+        self, state: RecurrentState, lang_term: Tensor, c_q: Tensor | None = None,
+        extra_ab: Tensor | None = None, steps: int | None = None,
+    ) -> Trajectory:
+        """Regenerate the states over a sequence from posteriors c_q of shape (time, batch, 4r).
+
+        With `c_q=None` every posterior equals its prior, computed on the fly in module order (open loop);
+        the length then comes from `extra_ab` or `steps`. `extra_ab` (time, batch, d_A_bottom) is added to
+        A_bottom's pre-activation at each step.
+        """
+        length = next(x.shape[0] for x in (c_q, extra_ab) if x is not None) if steps is None else steps
+        u_seq: list = [None] * length
+        if c_q is not None:
+            # U^l c^l_q for all steps at once; `unbind` avoids the T^2 backward of indexing in the loop.
+            per_module = c_q.chunk(4, dim=-1)
+            u_seq = list(zip(*(self.latent[m](per_module[m]).unbind(0) for m in range(4)), strict=True))
+        extra_seq = [None] * length if extra_ab is None else extra_ab.unbind(0)
         d_prev_top, outs, params = [], [], []
-        for u in u_seq:
+        for u, extra in zip(u_seq, extra_seq, strict=True):
             d_prev_top.append(state.d[T])
-            state, p, _ = self.step(state, lang_term, u)
+            state, p, _ = self.step(state, lang_term, u, extra)
             outs.append(state)
             params.append(p)
         d = tuple(torch.stack([s.d[m] for s in outs]) for m in range(4))
