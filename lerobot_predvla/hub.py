@@ -233,7 +233,8 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None) ->
     if train_cfg is not None:
         lines += [
             "",
-            f"Trained for {train_cfg['steps']:,} steps, batch size {train_cfg['batch_size']}, seed {train_cfg['seed']}.",
+            f"Trained for {train_cfg['steps']:,} steps, batch size {train_cfg['batch_size']}, "
+            f"seed {train_cfg['seed']}.",
         ]
     return "\n".join(lines)
 

