@@ -1,0 +1,259 @@
+"""`predvla sweep`: run records, skipping, resuming, sharding and commands (fake executor); one real
+lerobot-train run through the runner; the posterior store under DistributedDataParallel (gloo, CPU)."""
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+import torch
+import torch.distributed as dist
+import torch.multiprocessing as mp
+import yaml
+from safetensors.torch import save_file
+
+from lerobot_predvla.cli import main as predvla_main
+from lerobot_predvla.sweep import (
+    TRAIN_DONE_FILE,
+    Run,
+    Runner,
+    Sweep,
+    SweepError,
+    parse_eval_info,
+    parse_shard,
+    subprocess_executor,
+)
+
+
+def sweep_file(tmp_path: Path, **changes) -> Path:
+    (tmp_path / "L3.json").write_text(json.dumps({"type": "predvla", "er_iterations": 0, "tau": [1, 1, 1, 1]}))
+    spec = {
+        "seeds": [0, 1],
+        "suites": ["libero_object", "libero_spatial"],
+        "datasets": {s: {"repo_id": f"local/{s}", "root": f"data/{s}"} for s in ("libero_object", "libero_spatial")},
+        "train": {"device": "cpu"},
+        "eval": {"device": "cpu"},
+        "configs": [
+            {"name": "predvla", "group": "main", "suite_overrides": {"libero_10": {"sequence_length": 500}}},
+            {"name": "A6", "group": "ablation", "checkpoint_from": "predvla", "compare_to": "predvla",
+             "eval_overrides": {"er_iterations": 0}, "label": "- Online ER"},
+            {"name": "L3", "group": "ladder", "policy": "L3.json", "suites": ["libero_object"]},
+        ],
+        **changes,
+    }
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def arg(command: list[str], name: str) -> str | None:
+    return next((c.split("=", 1)[1] for c in command if c.startswith(f"--{name}=")), None)
+
+
+class FakeLeRobot:
+    """Stands in for lerobot-train / lerobot-eval: writes what they would write, records every command."""
+
+    def __init__(self, kill_training: int = 0):
+        self.commands: list[list[str]] = []
+        self.kill_training = kill_training  # the first n trainings die after their first checkpoint
+
+    def __call__(self, command: list[str], log: Path) -> int:
+        self.commands.append(command)
+        if any(c.endswith("lerobot-eval") for c in command):
+            out = Path(arg(command, "output_dir"))
+            out.mkdir(parents=True)
+            seed, n = int(arg(command, "seed")), int(arg(command, "eval.n_episodes"))
+            per_task = [{"task_group": arg(command, "env.task"), "task_id": t,
+                         "metrics": {"successes": [i < n - t - seed for i in range(n)], "sum_rewards": [0] * n}}
+                        for t in range(3)]
+            (out / "eval_info.json").write_text(json.dumps({"per_task": per_task, "overall": {}}))
+            return 0
+        if arg(command, "config_path"):  # resume
+            out = Path(arg(command, "config_path")).parents[3]
+        else:
+            out = Path(arg(command, "output_dir"))
+            assert not out.exists(), "lerobot-train refuses an existing output_dir without --resume"
+        ckpt = out / "checkpoints" / "000002" / "pretrained_model"
+        ckpt.mkdir(parents=True, exist_ok=True)
+        (ckpt / "train_config.json").write_text("{}")
+        if not (out / "checkpoints" / "last").exists():
+            (out / "checkpoints" / "last").symlink_to("000002")
+        if self.kill_training:
+            self.kill_training -= 1
+            return -9
+        save_file({"w": torch.zeros(3, 4), "b": torch.zeros(5)}, str(ckpt / "model.safetensors"))
+        return 0
+
+    def count(self, program: str) -> int:
+        return sum(any(c.endswith(program) for c in cmd) for cmd in self.commands)
+
+
+def test_runs_write_records_and_inference_variants_reuse_checkpoints(tmp_path):
+    fake = FakeLeRobot()
+    runner = Runner(Sweep.load(sweep_file(tmp_path)), tmp_path / "runs", execute=fake)
+    outcome = runner.run(progress=False)
+    # predvla and A6: 2 suites x 2 seeds; L3: 1 suite x 2 seeds.
+    assert len(outcome["done"]) == 10 and not outcome["failed"]
+    assert fake.count("lerobot-train") == 6 and fake.count("lerobot-eval") == 10  # A6 trains nothing
+    record = json.loads((tmp_path / "runs/records/A6/libero_object/seed1.json").read_text())
+    assert record["tasks"] == {"0": {"successes": 49, "episodes": 50}, "1": {"successes": 48, "episodes": 50},
+                               "2": {"successes": 47, "episodes": 50}}
+    assert record["success_rate"] == pytest.approx(100 * 144 / 150)
+    assert record["parameters"] == 17 and record["steps"] == 30_000 and record["group"] == "ablation"
+    assert record["checkpoint"].endswith("train/predvla/libero_object/seed1/checkpoints/000002/pretrained_model")
+    assert {"lerobot", "torch", "python"} <= set(record["versions"])
+    a6_eval = record["commands"]["eval"]
+    assert "--policy.er_iterations=0" in a6_eval and "--env.episode_length=600" in a6_eval
+    assert "--eval.n_episodes=50" in a6_eval and "--env.init_states=true" in a6_eval
+    l3_train = next(c for c in fake.commands if arg(c, "job_name") == "L3_libero_object_seed0")
+    assert "--policy.type=predvla" in l3_train and "--policy.tau=[1,1,1,1]" in l3_train
+    assert "--policy.er_iterations=0" in l3_train and "--steps=30000" in l3_train and "--batch_size=32" in l3_train
+    assert arg(l3_train, "dataset.root") == str(tmp_path / "data" / "libero_object")
+    plan = json.loads((tmp_path / "runs/plan.json").read_text())
+    assert len(plan["runs"]) == 10 and plan["configs"]["A6"]["checkpoint_from"] == "predvla"
+
+    again = FakeLeRobot()
+    runner.execute = again
+    outcome = runner.run(progress=False)
+    assert len(outcome["skipped"]) == 10 and again.commands == []
+
+
+def test_killed_training_resumes_and_killed_eval_is_redone(tmp_path):
+    sweep = Sweep.load(sweep_file(tmp_path, seeds=[0], suites=["libero_object"]))
+    fake = FakeLeRobot(kill_training=1)
+    runner = Runner(sweep, tmp_path / "runs", execute=fake)
+    outcome = runner.run(configs=["predvla"], progress=False)
+    assert outcome["failed"] == ["predvla/libero_object/seed0"]
+    assert not runner.record_path(Run("predvla", "libero_object", 0)).exists()
+
+    runner.eval_dir(Run("predvla", "libero_object", 0)).mkdir(parents=True)  # an evaluation killed midway
+    outcome = runner.run(configs=["predvla"], progress=False)
+    assert outcome["done"] == ["predvla/libero_object/seed0"]
+    resume = fake.commands[1]
+    assert "--resume=true" in resume
+    assert arg(resume, "config_path").endswith("seed0/checkpoints/last/pretrained_model/train_config.json")
+    assert json.loads((runner.train_dir("predvla", "libero_object", 0) / TRAIN_DONE_FILE).read_text())["resumed"]
+
+
+def test_shards_partition_training_units(tmp_path):
+    sweep = Sweep.load(sweep_file(tmp_path))
+    shards = [Runner(sweep, tmp_path / "runs").shard_units(None, (i, 3)) for i in range(3)]
+    keys = [[r.key for _, runs in units for r in runs] for units in shards]
+    assert sorted(k for ks in keys for k in ks) == sorted(r.key for r in sweep.runs())
+    assert all(ks for ks in keys)
+    for units in shards:  # an inference-time variant runs where its checkpoint is trained
+        for (trained, suite, seed), runs in units:
+            assert {r.config for r in runs} <= {trained, "A6"}
+            assert all((r.suite, r.seed) == (suite, seed) for r in runs)
+    assert parse_shard("2/3") == (2, 3)
+    for bad in ("3/3", "x", "1/0"):
+        with pytest.raises(SweepError, match="--shard"):
+            parse_shard(bad)
+
+
+def test_flags_shrink_the_protocol_and_accelerate_launch(tmp_path, capsys):
+    path = sweep_file(tmp_path)
+    code = predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs"), "--dry-run", "--configs", "A6",
+                         "--steps", "5", "--n-episodes", "2", "--episode-length", "100", "--seeds", "3",
+                         "--suites", "libero_object", "--accelerate-processes", "2"])
+    assert code == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 2  # train predvla (the checkpoint A6 needs), evaluate A6
+    train, evaluate = lines
+    assert " launch --multi_gpu --num_processes=2 " in train and "--batch_size=16" in train and "--steps=5" in train
+    assert "--seed=3" in train and "libero_object" in train
+    assert "--eval.n_episodes=2" in evaluate and "--env.episode_length=100" in evaluate
+    assert not (tmp_path / "runs" / "records").exists()
+
+
+def test_bad_sweep_files_name_the_problem(tmp_path, capsys):
+    cases = [
+        ({"configs": [{"name": "x", "group": "other"}]}, "group 'other'"),
+        ({"configs": [{"name": "x", "checkpoint_from": "y"}]}, "unknown configuration 'y'"),
+        ({"datasets": {}}, "`datasets` has no entry"),
+        ({"configs": [{"name": "x", "nonsense": 1}]}, "nonsense"),
+    ]
+    for changes, message in cases:
+        path = sweep_file(tmp_path, **changes)
+        assert predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "r"), "--dry-run"]) == 2
+        err = capsys.readouterr().err
+        assert message in err and str(path) in err
+
+
+def test_parse_eval_info_reads_lerobot_eval_output(tmp_path):
+    path = tmp_path / "eval_info.json"
+    path.write_text(json.dumps({"per_task": [
+        {"task_group": "libero_object", "task_id": 1, "metrics": {"successes": [True, False, True]}},
+        {"task_group": "libero_object", "task_id": 0, "metrics": {"successes": [False, False, False]}},
+    ], "per_group": {}, "overall": {}}))
+    assert parse_eval_info(path) == {"0": {"successes": 0, "episodes": 3}, "1": {"successes": 2, "episodes": 3}}
+    path.write_text(json.dumps({"overall": {}}))
+    with pytest.raises(SweepError, match="eval_info.json"):
+        parse_eval_info(path)
+
+
+def test_real_lerobot_train_through_the_runner(synthetic_dataset, tmp_path):
+    """The runner's lerobot-train command works as generated (evaluation faked: no LIBERO in tests)."""
+    dataset = {"repo_id": "local/predvla_synthetic", "root": str(synthetic_dataset)}
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], datasets={"libero_object": dataset},
+                      train={"device": "cpu", "steps": 2, "batch_size": 2, "save_freq": 2,
+                             "args": ["--num_workers=0", "--policy.sequence_length=32"]})
+    fake = FakeLeRobot()
+
+    def execute(command: list[str], log: Path) -> int:
+        return fake(command, log) if any(c.endswith("lerobot-eval") for c in command) else subprocess_executor(
+            command, log)
+
+    runner = Runner(Sweep.load(path), tmp_path / "runs", execute=execute)
+    outcome = runner.run(configs=["predvla"], progress=False)
+    log = runner.log_path("predvla", "libero_object", 0, "train")
+    assert outcome["done"] == ["predvla/libero_object/seed0"], log.read_text()[-3000:]
+    record = json.loads(runner.record_path(Run("predvla", "libero_object", 0)).read_text())
+    assert record["parameters"] == 675_732 and record["steps"] == 2
+
+
+# ----- posterior store under DDP -----------------------------------------------------------------------------
+def _policy(dataset_root: str):
+    from lerobot.datasets import LeRobotDatasetMetadata
+    from lerobot.policies.factory import make_policy
+
+    from lerobot_predvla import PredVLAConfig
+
+    torch.manual_seed(0)
+    meta = LeRobotDatasetMetadata("local/predvla_synthetic", root=dataset_root)
+    return make_policy(PredVLAConfig(device="cpu", sequence_length=16), ds_meta=meta)
+
+
+RANK_EPISODES = ([0, 1], [1, 6])  # episode 1 is in both processes' batches
+
+
+def _ddp_worker(rank: int, world: int, init_file: str, dataset_root: str, out: str) -> None:
+    torch.set_num_threads(1)
+    dist.init_process_group("gloo", init_method=f"file://{init_file}", rank=rank, world_size=world)
+    policy = _policy(dataset_root)
+    ddp = torch.nn.parallel.DistributedDataParallel(policy)
+    optimizer = torch.optim.Adam(policy.get_optim_params(), lr=1e-3)
+    loss, _ = ddp({"episode_index": torch.tensor(RANK_EPISODES[rank])})
+    loss.backward()
+    optimizer.step()
+    torch.save(policy.posterior_store.latents.detach(), os.path.join(out, f"rank{rank}.pt"))
+    dist.destroy_process_group()
+
+
+def test_posterior_store_stays_consistent_under_ddp(synthetic_dataset, tmp_path):
+    """Two processes, different episodes: gradients of the store are all-reduced like any parameter, so both
+    replicas take the same Adam step, equal to one process seeing both batches with the averaged loss."""
+    mp.spawn(_ddp_worker, args=(2, str(tmp_path / "init"), str(synthetic_dataset), str(tmp_path)), nprocs=2)
+    replicas = [torch.load(tmp_path / f"rank{r}.pt") for r in range(2)]
+    assert torch.equal(replicas[0], replicas[1])
+
+    policy = _policy(str(synthetic_dataset))
+    optimizer = torch.optim.Adam(policy.get_optim_params(), lr=1e-3)
+    assert any(g["params"] == [policy.posterior_store.latents] for g in optimizer.param_groups)
+    losses = [policy({"episode_index": torch.tensor(e)})[0] for e in RANK_EPISODES]
+    (sum(losses) / 2).backward()
+    optimizer.step()
+    torch.testing.assert_close(replicas[0], policy.posterior_store.latents.detach(), rtol=1e-5, atol=1e-6)
+    touched = sorted({e for episodes in RANK_EPISODES for e in episodes})
+    untouched = [e for e in range(replicas[0].shape[0]) if e not in touched]
+    assert replicas[0][touched].abs().sum() > 0 and replicas[0][untouched].abs().sum() == 0
