@@ -79,7 +79,45 @@ def test_lerobot_eval_runs_predvla_on_libero(checkpoint, tmp_path):
     log = run([str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", "--env.type=predvla_libero",
                f"--env.task={SUITE}", "--env.task_ids=[0]", f"--env.episode_length={EPISODE_STEPS}",
                "--eval.n_episodes=1", "--eval.batch_size=1", "--eval.use_async_envs=false", "--policy.device=cpu",
+               "--eval.max_episodes_rendered=0",
                f"--output_dir={tmp_path}"])
     info = json.loads((tmp_path / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 1, log[-2000:]
     assert 0.0 <= info["overall"]["pc_success"] <= 100.0
+
+
+def test_predvla_libero_env_observations():
+    """Fresh images every 4th step equal the demonstrations' render of the same state; proprio is joints+gripper."""
+    from lerobot.envs.utils import preprocess_observation
+
+    from lerobot_predvla.libero import env as libero_env  # first: headless MUJOCO_GL
+    from lerobot_predvla.libero.eval_config import PredVLALiberoEnv
+
+    cfg = PredVLALiberoEnv(task=SUITE, task_ids=[0])
+    venv = cfg.create_envs(n_envs=1)[SUITE][0]
+    env_pre, _post = cfg.get_env_processors()
+    obs, _info = venv.reset(seed=[0])
+    inner = venv.envs[0]._env
+    # The demonstrations' camera env (`predvla demos` renders kept episodes in it by replaying states).
+    demo_env = libero_env.make_env(libero_env.task_spec(SUITE, 0), render=True)
+    libero_env.random_reset(demo_env, 0)
+    libero_env.set_fixture_poses(demo_env, libero_env.fixture_poses(inner))
+    fresh_flags = []
+    for step in range(6):
+        raw = {"image": obs["pixels"]["image"][0], "joints": obs["robot_state"]["joints"]["pos"][0]}
+        processed = env_pre(preprocess_observation(obs))
+        fresh_flags.append(int(processed[OBS_IMAGE_FRESH].item()))
+        joints = torch.from_numpy(obs["robot_state"]["joints"]["pos"]).float()
+        gripper = torch.from_numpy(obs["robot_state"]["gripper"]["qpos"]).float()
+        torch.testing.assert_close(processed["observation.state"], torch.cat([joints, gripper], -1))
+        if step % 4 == 0:
+            demo_render = demo_env.regenerate_obs_from_state(inner.get_sim_state())
+            assert np.array_equal(raw["image"], demo_render["agentview_image"])
+            np.testing.assert_array_equal(raw["joints"], demo_render["robot0_joint_pos"])
+            # LeRobot orientation: rotated by 180 degrees, as LiberoProcessorStep does.
+            lerobot_image = torch.from_numpy(raw["image"][::-1, ::-1].copy()).permute(2, 0, 1).float() / 255
+            torch.testing.assert_close(processed["observation.images.image"][0], lerobot_image)
+        obs, *_ = venv.step(np.full((1, 7), 0.2, dtype=np.float32))
+    venv.close()
+    demo_env.close()
+    assert fresh_flags == [1, 0, 0, 0, 1, 0]

@@ -18,8 +18,8 @@ class SparseRenderLiberoEnv(LiberoEnv):
     Observation k (after k actions) gets freshly rendered images when k % render_interval == 0; the other
     steps repeat the last images and carry `image_fresh = 0`. Every observation is read at the end of the
     control step with the same robosuite calls as `regenerate_obs_from_state`, which is how
-    `predvla demos` recorded the training data, so a fresh image equals the demonstrations' render of the
-    same state.
+    `predvla demos` (and LIBERO's own datasets) rendered the training data, so a fresh image equals the
+    demonstrations' render of the same state.
     """
 
     def __init__(self, *args, render_interval: int = 4, **kwargs):
@@ -57,7 +57,10 @@ class SparseRenderLiberoEnv(LiberoEnv):
         }
 
     def _format_raw_obs(self, raw_obs: dict) -> dict:
-        raw_obs = dict(self._env.env._get_observations(force_update=True))  # end-of-step values
+        # As regenerate_obs_from_state: positions recomputed for the end-of-step state (mj_step leaves them
+        # one physics substep behind), then every observable re-read. Dynamics do not depend on this.
+        self._env.env.sim.forward()
+        raw_obs = dict(self._env.env._get_observations(force_update=True))
         fresh = self._images is None or self._steps_since_reset % self.render_interval == 0
         if fresh:
             self._images = self._render_cameras()
