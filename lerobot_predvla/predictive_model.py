@@ -13,8 +13,7 @@ from torch import Tensor, nn
 from torch.distributions import Categorical, Independent, MixtureSameFamily, Normal
 
 from .configuration_predvla import PredVLAConfig
-
-T, V, A_TOP, A_BOTTOM = range(4)
+from .recurrence import A_BOTTOM, A_TOP, FusedWeights, Meta, T, V, recurrence
 
 
 class RecurrentState(NamedTuple):
@@ -183,6 +182,38 @@ class PredictiveModel(nn.Module):
         new_state = RecurrentState((h_t, h_v, h_at, h_ab), (d_t, d_v, d_at, d_ab), a_hat, q_hat)
         return new_state, params, (torch.cat(used, dim=-1) if u is None else None)
 
+    def fused_weights(self, priors_on_the_fly: bool) -> FusedWeights:
+        """Each module's matmuls concatenated along their inputs (see `recurrence`).
+
+        With `priors_on_the_fly` the posterior equals the prior, so U^l c^l = U^l (W_p d + b_p) folds into the
+        weight of the prior's input: W_rec^T + U^T W_p^T for the root (Eq. 2), W_td + U W_p otherwise (Eq. 1).
+        """
+        folded = [self.latent[m].weight @ self.prior[m].weight if priors_on_the_fly else None for m in range(4)]
+
+        def fold(weight: Tensor, m: int) -> Tensor:
+            return weight if folded[m] is None else weight + folded[m]
+
+        w_v = [self.rec[V].weight, fold(self.td[0].weight, V)]
+        if self.config.use_efference_copy:
+            w_v += [self.efference_a.weight, self.efference_q.weight]
+        w_at = [self.rec[A_TOP].weight, fold(self.td[1].weight, A_TOP)]
+        if self.config.use_bottleneck:
+            w_at.append(self.bottleneck_out.weight)
+        q_head, action_net = self.q_head, self.action_head.net
+        k, a = self.config.num_mixtures, self.config.action_dim
+        action_rows = k * (1 + a)  # logits and means; the scales never enter the loop
+        return FusedWeights(
+            w_t=fold(self.rec[T].weight, T),
+            w_v=torch.cat(w_v, dim=1),
+            w_at=torch.cat(w_at, dim=1),
+            w_va=self.bottleneck_in.weight if self.config.use_bottleneck else None,
+            w_ab=torch.cat([self.rec[A_BOTTOM].weight, fold(self.td[2].weight, A_BOTTOM)], dim=1),
+            w1=torch.cat([q_head[0].weight, action_net[0].weight]),
+            b1=torch.cat([q_head[0].bias, action_net[0].bias]),
+            w2=torch.block_diag(q_head[2].weight, action_net[2].weight[:action_rows]),
+            b2=torch.cat([q_head[2].bias, action_net[2].bias[:action_rows]]),
+        )
+
     def rollout(
         self, state: RecurrentState, lang_term: Tensor, c_q: Tensor | None = None,
         extra_ab: Tensor | None = None, steps: int | None = None,
@@ -191,29 +222,33 @@ class PredictiveModel(nn.Module):
 
         With `c_q=None` every posterior equals its prior, computed on the fly in module order (open loop);
         the length then comes from `extra_ab` or `steps`. `extra_ab` (time, batch, d_A_bottom) is added to
-        A_bottom's pre-activation at each step.
+        A_bottom's pre-activation at each step. Same equations as a loop over `step`, fused (`recurrence`).
         """
         length = next(x.shape[0] for x in (c_q, extra_ab) if x is not None) if steps is None else steps
-        u_seq: list = [None] * length
-        if c_q is not None:
-            # U^l c^l_q for all steps at once; `unbind` avoids the T^2 backward of indexing in the loop.
+        batch = state.h[T].shape[0]
+        # Input-independent pre-activation terms for every step: U^l c^l_q + b^l (+ W_lang l) (Eqs. 3-4).
+        if c_q is None:
+            p = [(self.bias[m] + self.latent[m](self.prior[m].bias)).expand(length, batch, -1) for m in range(4)]
+        else:
             per_module = c_q.chunk(4, dim=-1)
-            u_seq = list(zip(*(self.latent[m](per_module[m]).unbind(0) for m in range(4)), strict=True))
-        extra_seq = [None] * length if extra_ab is None else extra_ab.unbind(0)
-        d_prev_top, outs, params = [], [], []
-        for u, extra in zip(u_seq, extra_seq, strict=True):
-            d_prev_top.append(state.d[T])
-            state, p, _ = self.step(state, lang_term, u, extra)
-            outs.append(state)
-            params.append(p)
-        d = tuple(torch.stack([s.d[m] for s in outs]) for m in range(4))
+            p = [self.latent[m](per_module[m]) + self.bias[m] for m in range(4)]
+        p[T] = p[T] + lang_term
+        if extra_ab is not None:
+            p[A_BOTTOM] = p[A_BOTTOM] + extra_ab
+        cfg = self.config
+        meta = Meta(self.alpha, cfg.use_efference_copy, cfg.num_mixtures, cfg.action_dim, cfg.proprio_dim)
+        d, q_hat, a_hat, h_final = recurrence(
+            meta, p, state.h, state.d, state.a_hat, state.q_hat, self.fused_weights(c_q is None)
+        )
+        final = RecurrentState(h_final, tuple(x[-1] for x in d), a_hat[-1], q_hat[-1])
+        # Full GMM parameters (for the NLL) batched after the loop; their mode is the loop's a_hat.
         return Trajectory(
-            d=d,
-            d_prev_top=torch.stack(d_prev_top),
-            q_hat=torch.stack([s.q_hat for s in outs]),
-            a_hat=torch.stack([s.a_hat for s in outs]),
-            action_params=tuple(torch.stack(x) for x in zip(*params, strict=True)),
-            final=state,
+            d=tuple(d),
+            d_prev_top=torch.cat([state.d[T][None], d[T][:-1]]),
+            q_hat=q_hat,
+            a_hat=a_hat,
+            action_params=self.action_head(d[A_BOTTOM]),
+            final=final,
         )
 
     def priors(self, traj: Trajectory) -> Tensor:

@@ -1,0 +1,191 @@
+"""Fused recurrence of Eqs. 3-6 with a hand-written backpropagation through time.
+
+Every input-independent pre-activation term P^l_t (U^l c^l_{q,t}, W_lang l, b^l, any extra input) is computed
+for the whole sequence before the loop. Inside the loop each module applies one matmul to its concatenated
+inputs, e.g. [W_rec | W_td | W_ba | W_bq] [d^V_{t-1}; d^T_t; a_{t-1}; q_{t-1}], and stores what the backward
+needs in preallocated buffers. The backward runs the recurrence in reverse with input-gradient matmuls only,
+then forms each weight gradient with one matmul over all steps. Pure tensor code: runs on any device.
+"""
+
+from typing import NamedTuple
+
+import torch
+from torch import Tensor
+
+T, V, A_TOP, A_BOTTOM = range(4)
+
+
+class FusedWeights(NamedTuple):
+    """Per-module weights concatenated along their inputs (built from the parameters under autograd)."""
+
+    w_t: Tensor  # (d_T, d_T): W_rec^T
+    w_v: Tensor  # (d_V, d_V + d_T [+ a + q]): [W_rec^V | W_td^V | W_ba | W_bq] (Eqs. 3, 6)
+    w_at: Tensor  # (d_At, d_At + d_T [+ z]): [W_rec^At | W_td^At | W_top] (Eqs. 3, 5)
+    w_va: Tensor | None  # (z, d_V): W_VA (Eq. 5), None without the bottleneck (ablation A2)
+    w_ab: Tensor  # (d_Ab, d_Ab + d_At): [W_rec^Ab | W_td^Ab]
+    w1: Tensor  # (2H, d_Ab): first layers of the q and action heads, stacked
+    b1: Tensor
+    w2: Tensor  # (q + K + K a, 2H): block-diagonal second layers -> [q_hat | logits | means]
+    b2: Tensor
+
+
+class Meta(NamedTuple):
+    alpha: tuple[float, float, float, float]  # 1 / tau_l
+    efference: bool  # the V module reads [a_{t-1}, q_{t-1}] (Eq. 6)
+    num_mixtures: int
+    action_dim: int
+    proprio_dim: int
+
+
+def _forward(meta: Meta, p: list[Tensor], h: list[Tensor], d: list[Tensor], a: Tensor, q: Tensor, w: FusedWeights):
+    """The loop; returns the outputs and the buffers the backward reads."""
+    steps, batch = p[T].shape[:2]
+    nq, k, na = meta.proprio_dim, meta.num_mixtures, meta.action_dim
+    # Buffers: D^l holds d^l_0..d^l_T (row 0 = initial state); G^l = tanh(pre-activation); IN^l = matmul inputs.
+    dbuf = [x.new_empty((steps + 1, *x.shape)) for x in d]
+    for buf, x in zip(dbuf, d, strict=True):
+        buf[0] = x
+    gbuf = [x.new_empty((steps, *x.shape)) for x in d]
+    inbuf = [None] + [a.new_empty((steps, batch, w_.shape[1])) for w_ in (w.w_v, w.w_at, w.w_ab)]
+    y1 = a.new_empty((steps, batch, w.w1.shape[0]))
+    out = a.new_empty((steps, batch, w.w2.shape[0]))
+    abuf = a.new_empty((steps, batch, na))
+    dsteps = [buf[1:].unbind(0) for buf in dbuf]
+    gsteps = [buf.unbind(0) for buf in gbuf]
+    insteps = [None] + [buf.unbind(0) for buf in inbuf[1:]]
+    psteps = [x.unbind(0) for x in p]
+    wt = [w.w_t.t(), w.w_v.t(), w.w_at.t(), w.w_ab.t()]
+    w_va_t = None if w.w_va is None else w.w_va.t()
+    w1_t, w2_t = w.w1.t(), w.w2.t()
+    a_t, a_v, a_at, a_ab = meta.alpha
+    d_t, d_v, d_at, d_ab = d
+    h_t, h_v, h_at, h_ab = h
+    index = []
+    for i, (y1_i, out_i, a_i) in enumerate(zip(y1.unbind(0), out.unbind(0), abuf.unbind(0), strict=True)):
+        # T (Eq. 4): h = (1 - 1/tau) h + 1/tau tanh(P + W_rec d_{t-1}), d = tanh(h).
+        g = torch.addmm(psteps[T][i], d_t, wt[T], out=gsteps[T][i]).tanh_()
+        h_t = torch.lerp(h_t, g, a_t)
+        d_t = torch.tanh(h_t, out=dsteps[T][i])
+        # V (Eqs. 3, 6).
+        parts = (d_v, d_t, a, q) if meta.efference else (d_v, d_t)
+        g = torch.addmm(psteps[V][i], torch.cat(parts, 1, out=insteps[V][i]), wt[V], out=gsteps[V][i]).tanh_()
+        h_v = torch.lerp(h_v, g, a_v)
+        d_v = torch.tanh(h_v, out=dsteps[V][i])
+        # A_top (Eqs. 3, 5): z = W_VA d^V.
+        parts = (d_at, d_t) if w_va_t is None else (d_at, d_t, torch.mm(d_v, w_va_t))
+        g = torch.addmm(psteps[A_TOP][i], torch.cat(parts, 1, out=insteps[A_TOP][i]), wt[A_TOP],
+                        out=gsteps[A_TOP][i]).tanh_()
+        h_at = torch.lerp(h_at, g, a_at)
+        d_at = torch.tanh(h_at, out=dsteps[A_TOP][i])
+        # A_bottom (Eq. 3).
+        g = torch.addmm(psteps[A_BOTTOM][i], torch.cat((d_ab, d_at), 1, out=insteps[A_BOTTOM][i]), wt[A_BOTTOM],
+                        out=gsteps[A_BOTTOM][i]).tanh_()
+        h_ab = torch.lerp(h_ab, g, a_ab)
+        d_ab = torch.tanh(h_ab, out=dsteps[A_BOTTOM][i])
+        # Heads: q_hat and the mode of the GMM (mean of the highest-weight component), fed back by Eq. 6.
+        torch.addmm(w.b2, torch.relu_(torch.addmm(w.b1, d_ab, w1_t, out=y1_i)), w2_t, out=out_i)
+        q = out_i[:, :nq]
+        idx = out_i[:, nq : nq + k].argmax(1).view(batch, 1, 1).expand(batch, 1, na)
+        a = torch.tanh(out_i[:, nq + k :].view(batch, k, na).gather(1, idx).squeeze(1), out=a_i)
+        index.append(idx)
+    return (dbuf, gbuf, inbuf, y1, out, abuf, torch.stack(index)), (h_t, h_v, h_at, h_ab)
+
+
+class _Recurrence(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, meta: Meta, *args: Tensor):
+        p, h, d, (a0, q0), w = list(args[0:4]), list(args[4:8]), list(args[8:12]), args[12:14], FusedWeights(*args[14:])
+        (dbuf, gbuf, inbuf, y1, out, abuf, index), h_final = _forward(meta, p, h, d, a0, q0, w)
+        ctx.meta = meta
+        ctx.save_for_backward(*dbuf, *gbuf, *inbuf[1:], y1, out, abuf, index, *w)
+        ctx.has_va = w.w_va is not None
+        q_hat = out[..., : meta.proprio_dim].contiguous()
+        return (*(buf[1:] for buf in dbuf), q_hat, abuf, *h_final)
+
+    @staticmethod
+    def backward(ctx, *grads: Tensor | None):
+        meta = ctx.meta
+        saved = ctx.saved_tensors
+        dbuf, gbuf, inbuf = saved[0:4], saved[4:8], (None, *saved[8:11])
+        y1, out, abuf, index = saved[11:15]
+        w = FusedWeights(*saved[15:])
+        g_d, g_q, g_a, g_h = grads[0:4], grads[4], grads[5], grads[6:10]
+        steps, batch = abuf.shape[:2]
+        nq, k, na = meta.proprio_dim, meta.num_mixtures, meta.action_dim
+        dims = [buf.shape[-1] for buf in dbuf]
+        # Batched derivative factors: d/dh tanh(h) = 1 - d^2, d/dpre [h] = 1/tau (1 - g^2), ReLU mask, tanh of the mode.
+        dd = [(1 - buf[1:].square()).unbind(0) for buf in dbuf]
+        dg = [(alpha * (1 - buf.square())).unbind(0) for alpha, buf in zip(meta.alpha, gbuf, strict=True)]
+        relu_mask = (y1 > 0).to(y1.dtype).unbind(0)
+        da = (1 - abuf.square()).unbind(0)
+        gx_buf = [buf.new_empty(buf.shape) for buf in gbuf]  # gradient of each pre-activation
+        gout = out.new_zeros(out.shape)
+        gy1 = y1.new_empty(y1.shape)
+        gx, gout_s, gy1_s, index_s = [b.unbind(0) for b in gx_buf], gout.unbind(0), gy1.unbind(0), index.unbind(0)
+        ext_d = [None if g is None else g.unbind(0) for g in g_d]
+        ext_q = None if g_q is None else g_q.unbind(0)
+        ext_a = None if g_a is None else g_a.unbind(0)
+        decay = [1.0 - alpha for alpha in meta.alpha]
+        gh = [abuf.new_zeros((batch, n)) if g is None else g.clone() for g, n in zip(g_h, dims, strict=True)]
+        carry = [abuf.new_zeros((batch, n)) for n in dims]  # gradient reaching d^l_{t-1} from step t
+        carry_a, carry_q = abuf.new_zeros((batch, na)), abuf.new_zeros((batch, nq))
+        d_t_, d_v_, d_at_, d_ab_ = dims
+        z_start = d_at_ + d_t_
+
+        def module(m: int, i: int, gd: Tensor, weight: Tensor) -> Tensor:
+            """Leaky-integrator backward (Eqs. 3-4) of module m at step i; returns the input gradient."""
+            if ext_d[m] is not None:
+                gd = gd + ext_d[m][i]
+            gh[m] = torch.addcmul(gh[m], gd, dd[m][i])
+            torch.mul(gh[m], dg[m][i], out=gx[m][i])
+            gh[m].mul_(decay[m])
+            return torch.mm(gx[m][i], weight)
+
+        for i in reversed(range(steps)):
+            # Heads: q_hat and the selected component's tanh mean (the argmax carries no gradient).
+            go = gout_s[i]
+            go[:, :nq] = carry_q if ext_q is None else carry_q + ext_q[i]
+            ga = carry_a if ext_a is None else carry_a + ext_a[i]
+            go[:, nq + k :].view(batch, k, na).scatter_(1, index_s[i], (ga * da[i]).unsqueeze(1))
+            torch.mm(go, w.w2, out=gy1_s[i]).mul_(relu_mask[i])
+            gin = module(A_BOTTOM, i, torch.addmm(carry[A_BOTTOM], gy1_s[i], w.w1), w.w_ab)
+            carry[A_BOTTOM] = gin[:, :d_ab_]
+            gin = module(A_TOP, i, carry[A_TOP] + gin[:, d_ab_:], w.w_at)
+            carry[A_TOP], gd_t = gin[:, :d_at_], gin[:, d_at_:z_start]
+            gd_v = carry[V] if w.w_va is None else torch.addmm(carry[V], gin[:, z_start:], w.w_va)
+            gin = module(V, i, gd_v, w.w_v)
+            carry[V] = gin[:, :d_v_]
+            gd_t = gd_t + gin[:, d_v_ : d_v_ + d_t_]
+            if meta.efference:
+                carry_a, carry_q = gin[:, d_v_ + d_t_ : d_v_ + d_t_ + na], gin[:, d_v_ + d_t_ + na :]
+            carry[T] = module(T, i, carry[T] + gd_t, w.w_t)
+
+        needs = ctx.needs_input_grad[1:]
+        grad_w = [None] * len(w)
+        flat = [x.flatten(0, 1) for x in gx_buf]
+        inputs = [dbuf[T][:-1], *inbuf[1:]]
+        for j, (m, key) in enumerate(((T, 0), (V, 1), (A_TOP, 2), (A_BOTTOM, 4))):
+            if needs[14 + key]:
+                grad_w[key] = flat[m].t() @ inputs[j].flatten(0, 1)
+        if ctx.has_va and needs[14 + 3]:
+            grad_z = flat[A_TOP] @ w.w_at[:, z_start:]
+            grad_w[3] = grad_z.t() @ dbuf[V][1:].flatten(0, 1)
+        gy1_flat, gout_flat = gy1.flatten(0, 1), gout.flatten(0, 1)
+        if needs[14 + 5]:
+            grad_w[5] = gy1_flat.t() @ dbuf[A_BOTTOM][1:].flatten(0, 1)
+        if needs[14 + 6]:
+            grad_w[6] = gy1_flat.sum(0)
+        if needs[14 + 7]:
+            grad_w[7] = gout_flat.t() @ y1.flatten(0, 1)
+        if needs[14 + 8]:
+            grad_w[8] = gout_flat.sum(0)
+        grad_a0, grad_q0 = (carry_a, carry_q) if meta.efference else (None, None)
+        return (None, *gx_buf, *gh, *carry, grad_a0, grad_q0, *grad_w)
+
+
+def recurrence(
+    meta: Meta, p: list[Tensor], h: tuple[Tensor, ...], d: tuple[Tensor, ...], a: Tensor, q: Tensor, w: FusedWeights
+) -> tuple[list[Tensor], Tensor, Tensor, tuple[Tensor, ...]]:
+    """Run Eqs. 3-6 over p's steps: d^l for every step (time-major), q_hat, a_hat and the final h^l."""
+    outs = _Recurrence.apply(meta, *p, *h, *d, a, q, *w)
+    return list(outs[0:4]), outs[4], outs[5], tuple(outs[6:10])
