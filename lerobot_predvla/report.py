@@ -160,7 +160,7 @@ class Results:
 
     def ladder_previous(self) -> dict[str, str | None]:
         """Each rung's comparison rung: `compare_to`, else the preceding main-chain rung."""
-        previous, last = {}, None
+        previous, last = {}, self.reference()  # the chain starts at the intact model (L0)
         for name in self.of_group("ladder"):
             c = self.configs[name]
             previous[name] = c.get("compare_to") or last
@@ -253,13 +253,23 @@ def baseline_table(summary: dict) -> str | None:
     return _table(["", "Model", "Params", "vs. ours", *[SUITE_LABELS[s] for s in suites], "Mean"], rows)
 
 
+def ladder_rungs(summary: dict) -> tuple[list[str], list[str]]:
+    """(main chain starting at the intact model, side branches) of the ladder; empty without ladder configs."""
+    configs = summary["configs"]
+    ladder = [n for n, c in configs.items() if c["group"] == "ladder"]
+    if not ladder:
+        return [], []
+    ref = summary["reference"]
+    chain = ([ref] if ref and ref not in ladder else []) + [n for n in ladder if not configs[n]["branch"]]
+    return chain, [n for n in ladder if configs[n]["branch"]]
+
+
 def ladder_table(summary: dict) -> str | None:
-    names = [n for n, c in summary["configs"].items() if c["group"] == "ladder"]
-    if not names:
+    chain, branches = ladder_rungs(summary)
+    if not chain:
         return None
     short = [s for s in SHORT_SUITES if s in summary["suites"]]
-    ordered = [n for n in names if not summary["configs"][n]["branch"]] + [
-        n for n in names if summary["configs"][n]["branch"]]
+    ordered = chain + branches
     rows = []
     for n in ordered:
         c = summary["configs"][n]
@@ -312,8 +322,7 @@ def ladder_figure(summary: dict, path: Path) -> bool:
     import matplotlib.pyplot as plt
 
     configs = summary["configs"]
-    chain = [n for n, c in configs.items() if c["group"] == "ladder" and not c["branch"]]
-    branches = [n for n, c in configs.items() if c["group"] == "ladder" and c["branch"]]
+    chain, branches = ladder_rungs(summary)
     if not chain:
         return False
     short = [s for s in SHORT_SUITES if s in summary["suites"]]
@@ -365,8 +374,8 @@ def params_figure(summary: dict, path: Path) -> bool:
         ax.annotate(name, (params, success), textcoords="offset points", xytext=(5, 4), fontsize=8)
     for name, success in PARAMETERLESS_REFERENCES:
         ax.axhline(success, color="tab:gray", linestyle=":", linewidth=1)
-        ax.annotate(f"{name} {success} (params not reported)", (1e5, success), textcoords="offset points",
-                    xytext=(2, 3), fontsize=8, color="tab:gray")
+        ax.annotate(f"{name} {success} (params not reported)", (1e7, success), textcoords="offset points",
+                    xytext=(0, -11), fontsize=8, color="tab:gray")
     for i, (name, params, success) in enumerate(ours):
         ax.scatter(params, success, marker="o", color="tab:red", zorder=3, label="this sweep" if i == 0 else None)
         ax.annotate(name, (params, success), textcoords="offset points", xytext=(5, -10), fontsize=8, color="tab:red")
