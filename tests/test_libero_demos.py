@@ -3,6 +3,7 @@
 Needs the simulator (`make libero`, which `make test` runs first); without it the test fails.
 """
 
+import dataclasses
 import json
 
 import h5py
@@ -40,6 +41,13 @@ def test_expert_episode_to_hdf5(libero, tmp_path):
     render_env = env_mod.make_env(spec, render=True)
     env_mod.random_reset(render_env, 0)
     obs = replay_observations(render_env, episode)
+    # Sparse rendering (`--render-interval 4`): steps 0, 4, 8 as before, the others repeat the last images.
+    head = dataclasses.replace(episode, states=episode.states[:9], actions=episode.actions[:9])
+    sparse = replay_observations(render_env, head, render_interval=4)
+    for t in range(9):
+        np.testing.assert_array_equal(sparse["agentview_rgb"][t], obs["agentview_rgb"][t - t % 4])
+        np.testing.assert_array_equal(sparse["eye_in_hand_rgb"][t], obs["eye_in_hand_rgb"][t - t % 4])
+    np.testing.assert_array_equal(sparse["joint_states"], obs["joint_states"][:9])
     # Replaying the last saved state and the last action reproduces the success.
     render_env.regenerate_obs_from_state(episode.states[-1])
     render_env.step(episode.actions[-1])

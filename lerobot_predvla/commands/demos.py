@@ -31,6 +31,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", type=Path, default=None, help="root folder; files go to OUT/SUITE/")
     p.add_argument("--no-render", action="store_true",
                    help="only measure expert success: no rendering, no files (then --out is not needed)")
+    p.add_argument("--render-interval", type=int, default=1,
+                   help="render the cameras every k-th step, repeating the last images in between (default 1: "
+                   "every step, LIBERO's layout; 4 = PredVLA's visual refresh, 4x cheaper)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 
@@ -47,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.per_task < 1:
         raise SystemExit("--per-task must be >= 1")
+    if args.render_interval < 1:
+        raise SystemExit("--render-interval must be >= 1")
     if args.out is None and not args.no_render:
         raise SystemExit("--out is required (or pass --no-render to only measure expert success)")
     task_ids = args.tasks if args.tasks is not None else list(range(num_tasks(args.suite)))
@@ -74,9 +79,9 @@ def run(args: argparse.Namespace) -> int:
         if kept and not args.no_render:
             render_env = make_env(spec, render=True)
             random_reset(render_env, 0)
-            attrs = file_attrs(spec, render_env)
+            attrs = {**file_attrs(spec, render_env), "predvla_render_interval": args.render_interval}
             for episode in tqdm(kept, desc=f"{args.suite}/{task_id} rendering", unit="demo"):
-                obs = replay_observations(render_env, episode)
+                obs = replay_observations(render_env, episode, args.render_interval)
                 demos.append({**obs, "actions": episode.actions, "states": episode.states,
                               "model_file": episode.model_xml})
             render_env.close()
