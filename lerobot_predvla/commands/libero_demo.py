@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         _skip("1/6 demonstrations", hdf5 / args.suite)
     else:
         _run("1/6 demonstrations", [*predvla, "demos", "--suite", args.suite, "--tasks", tasks,
-                                    "--per-task", str(args.per_task), "--out", str(hdf5)])
+                                    "--per-task", str(args.per_task), "--render-interval", "4", "--out", str(hdf5)])
     if frontend.exists():
         _skip("2/6 front end", frontend)
     else:
