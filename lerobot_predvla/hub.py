@@ -29,7 +29,7 @@ from safetensors import safe_open
 from .configuration_predvla import PredVLAConfig
 from .frontend.artefact import FRONTEND_META_DIR, METADATA_FILE, TENSORS_FILE
 from .posterior_store import POSTERIOR_STORE_FILE
-from .sweep import PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from .sweep import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
 
 CARD_TEMPLATE = Path(__file__).resolve().parent.parent / "hub_cards" / "predvla.md"
 CARD_FILE = "README.md"
@@ -165,7 +165,7 @@ def _suite_of(dataset_repo_id: str) -> str | None:
 
 def eval_command(repo_id: str, suite: str) -> str:
     return (
-        f"lerobot-eval --policy.path={repo_id} --env.type=libero --env.task={suite} "
+        f"lerobot-eval --policy.path={repo_id} --env.type={EVAL_ENV_TYPE} --env.task={suite} "
         f"--env.episode_length={PAPER_EPISODE_LENGTH} --eval.n_episodes={PAPER_EPISODES_PER_TASK} "
         "--eval.batch_size=1 --eval.use_async_envs=false --policy.device=cuda --output_dir=outputs/eval"
     )

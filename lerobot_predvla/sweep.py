@@ -30,6 +30,7 @@ PAPER_EPISODE_LENGTH = 600  # Section 4: control-step cap per rollout
 PAPER_TRAIN_STEPS = 30_000
 PAPER_BATCH_SIZE = 32
 GROUPS = ("main", "baseline", "ladder", "ablation", "corruption")
+EVAL_ENV_TYPE = "predvla_libero"  # LeRobot's LIBERO env with PredVLA's proprioception (libero/eval_config.py)
 TRAIN_DONE_FILE = "predvla_sweep_train.json"  # written beside a finished training's checkpoints
 
 Executor = Callable[[list[str], Path], int]  # (command, log file) -> exit code
@@ -126,6 +127,7 @@ class Settings:
     episode_length: int = PAPER_EPISODE_LENGTH
     eval_batch_size: int = 1
     eval_device: str = "cuda"
+    env_type: str = EVAL_ENV_TYPE
     eval_args: list[str] = field(default_factory=list)
 
 
@@ -160,6 +162,9 @@ class Sweep:
             raw = yaml.safe_load(text)
         if not isinstance(raw, dict) or not raw.get("configs"):
             raise SweepError(f"{path}: expected a mapping with a non-empty `configs` list.")
+        unknown = set(raw) - {"seeds", "suites", "datasets", "train", "eval", "configs"}
+        if unknown:
+            raise SweepError(f"{path}: unknown top-level keys {sorted(unknown)}.")
         train, evaluation = raw.get("train", {}), raw.get("eval", {})
         try:
             settings = Settings(
@@ -176,6 +181,7 @@ class Sweep:
                 episode_length=int(evaluation.get("episode_length", PAPER_EPISODE_LENGTH)),
                 eval_batch_size=int(evaluation.get("batch_size", 1)),
                 eval_device=str(evaluation.get("device", "cuda")),
+                env_type=str(evaluation.get("env_type", EVAL_ENV_TYPE)),
                 eval_args=list(evaluation.get("args", [])),
             )
             configs = [ConfigSpec(**entry) for entry in raw["configs"]]
@@ -378,7 +384,7 @@ class Runner:
             f"--policy.path={checkpoint}",
             f"--policy.device={s.eval_device}",
             *_as_args(spec.eval_overrides, "policy"),
-            "--env.type=libero",
+            f"--env.type={s.env_type}",
             f"--env.task={run.suite}",
             f"--env.episode_length={s.episode_length}",
             "--env.init_states=true",

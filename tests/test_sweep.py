@@ -105,6 +105,7 @@ def test_runs_write_records_and_inference_variants_reuse_checkpoints(tmp_path):
     a6_eval = record["commands"]["eval"]
     assert "--policy.er_iterations=0" in a6_eval and "--env.episode_length=600" in a6_eval
     assert "--eval.n_episodes=50" in a6_eval and "--env.init_states=true" in a6_eval
+    assert "--env.type=predvla_libero" in a6_eval and "--env.task=libero_object" in a6_eval
     l3_train = next(c for c in fake.commands if arg(c, "job_name") == "L3_libero_object_seed0")
     assert "--policy.type=predvla" in l3_train and "--policy.tau=[1,1,1,1]" in l3_train
     assert "--policy.er_iterations=0" in l3_train and "--steps=30000" in l3_train and "--batch_size=32" in l3_train
@@ -257,3 +258,10 @@ def test_posterior_store_stays_consistent_under_ddp(synthetic_dataset, tmp_path)
     touched = sorted({e for episodes in RANK_EPISODES for e in episodes})
     untouched = [e for e in range(replicas[0].shape[0]) if e not in touched]
     assert replicas[0][touched].abs().sum() > 0 and replicas[0][untouched].abs().sum() == 0
+
+
+def test_the_paper_sweep_file_is_valid():
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")
+    assert sweep.settings.n_episodes == 50 and sweep.settings.episode_length == 600 and len(sweep.settings.seeds) == 14
+    assert sweep.configs["A6"].checkpoint_from == "predvla" and sweep.configs["L2b"].branch
+    assert len(sweep.runs(["predvla"])) == 56 and len(sweep.runs(["A1"])) == 21
