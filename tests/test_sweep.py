@@ -13,6 +13,7 @@ import yaml
 from safetensors.torch import save_file
 
 from lerobot_predvla.cli import main as predvla_main
+from lerobot_predvla.report import write_report
 from lerobot_predvla.sweep import (
     TRAIN_DONE_FILE,
     Run,
@@ -117,6 +118,10 @@ def test_runs_write_records_and_inference_variants_reuse_checkpoints(tmp_path):
     runner.execute = again
     outcome = runner.run(progress=False)
     assert len(outcome["skipped"]) == 10 and again.commands == []
+
+    summary = write_report(tmp_path / "runs", tmp_path / "report")  # the records feed the report as written
+    paired = summary["configs"]["A6"]["paired"]["libero_object"]
+    assert paired["n"] == 2 and paired["delta"] == 0.0 and summary["missing_runs"] == []
 
 
 def test_killed_training_resumes_and_killed_eval_is_redone(tmp_path):
