@@ -90,8 +90,10 @@ class PredVLAPolicy(PreTrainedPolicy):
             private=self.config.private,
         )
 
-    def push_to_hub(self, repo_id: str, *, private: bool | None = None) -> str:
+    def push_to_hub(self, repo_id: str, *, private: bool | None = None, card_kwargs: dict | None = None) -> str:
         """Publish this policy (network, config, PredVLA card; no posteriors) to `repo_id`."""
+        if card_kwargs:
+            raise ValueError("PredVLA's model card is rendered from hub_cards/predvla.md; card_kwargs are not used.")
         from .hub import push_policy
 
         return self._without_posteriors(push_policy, self, repo_id, private=private)
