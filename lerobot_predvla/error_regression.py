@@ -6,18 +6,38 @@ with the network frozen, regenerating the states from the window start after eac
 the action from A_bottom. With zero iterations no observation is ever read: exact open loop.
 """
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
 import torch
 from torch import Tensor
 
 from .predictive_model import GMMActionHead, PredictiveModel, RecurrentState, Trajectory
 
 
-class ErrorRegression:
-    """Sliding-window posterior inference for a batch of parallel episodes."""
+@contextmanager
+def frozen(model: PredictiveModel) -> Iterator[None]:
+    """The network is fixed during error regression: no weight gradient is ever formed."""
+    flags = [p.requires_grad for p in model.parameters()]
+    model.requires_grad_(False)
+    try:
+        yield
+    finally:
+        for p, flag in zip(model.parameters(), flags, strict=True):
+            p.requires_grad_(flag)
 
-    def __init__(self, model: PredictiveModel):
+
+class ErrorRegression:
+    """Sliding-window posterior inference for a batch of parallel episodes.
+
+    `rollout` defaults to the model's fused `PredictiveModel.rollout`; any callable with its signature fits
+    (the benchmarks pass the eager reference).
+    """
+
+    def __init__(self, model: PredictiveModel, rollout: Callable[..., Trajectory] | None = None):
         self.model = model
         self.config = model.config
+        self.rollout = model.rollout if rollout is None else rollout
         self.reset()
 
     def reset(self) -> None:
@@ -54,8 +74,9 @@ class ErrorRegression:
         """
         model, cfg = self.model, self.config
         if self.state is None:
-            self.lang_term = model.language_term(language)
-            self.start_state = self.state = model.initial_state(language.shape[0])
+            with torch.no_grad():
+                self.lang_term = model.language_term(language)
+                self.start_state = self.state = model.initial_state(language.shape[0])
         with torch.no_grad():
             state, params, prior = model.step(self.state, self.lang_term, None)
         fresh = self.step_index % cfg.visual_refresh_interval == 0
@@ -69,7 +90,7 @@ class ErrorRegression:
         self.fresh.append(fresh)
         if len(self.posteriors) > cfg.er_window:  # slide: the oldest posterior is final
             with torch.no_grad():
-                self.start_state = model.rollout(self.start_state, self.lang_term, self.posteriors[0][None]).final
+                self.start_state = self.rollout(self.start_state, self.lang_term, self.posteriors[0][None]).final
             for buffer in (self.posteriors, self.vision, self.proprio, self.fresh):
                 del buffer[0]
         return None
@@ -78,23 +99,23 @@ class ErrorRegression:
         """Free energy of the window at the current posteriors (no gradient)."""
         with torch.no_grad():
             c_q = torch.stack(self.posteriors)
-            return self.free_energy(self.model.rollout(self.start_state, self.lang_term, c_q), c_q)
+            return self.free_energy(self.rollout(self.start_state, self.lang_term, c_q), c_q)
 
     def infer(self) -> None:
         """Step 2: n_itr Adam steps on the window's posteriors, network frozen, states regenerated."""
-        model = self.model
         c_q = torch.stack(self.posteriors).requires_grad_(True)
         optimizer = torch.optim.Adam([c_q], lr=self.config.er_lr)
-        for _ in range(self.config.er_iterations):
-            traj = model.rollout(self.start_state, self.lang_term, c_q)
-            optimizer.zero_grad(set_to_none=True)
-            self.free_energy(traj, c_q).backward(inputs=[c_q])
-            optimizer.step()
+        with frozen(self.model):
+            for _ in range(self.config.er_iterations):
+                traj = self.rollout(self.start_state, self.lang_term, c_q)
+                optimizer.zero_grad(set_to_none=True)
+                self.free_energy(traj, c_q).backward(inputs=[c_q])
+                optimizer.step()
         self.posteriors = list(c_q.detach().unbind(0))
 
     def act(self) -> Tensor:
         """Step 3: regenerate the window from the updated posteriors and decode the action from A_bottom."""
         with torch.no_grad():
-            traj = self.model.rollout(self.start_state, self.lang_term, torch.stack(self.posteriors))
+            traj = self.rollout(self.start_state, self.lang_term, torch.stack(self.posteriors))
         self.state = traj.final
         return traj.final.a_hat
