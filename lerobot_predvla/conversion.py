@@ -10,6 +10,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.constants import ACTION, OBS_STATE
 from tqdm import tqdm
@@ -64,7 +65,15 @@ def _write_episodes(dataset: LeRobotDataset, refs: list[DemoRef], frontend: Froz
         for ref in refs:
             demo = read_demo(ref)
             images = {camera: libero_hdf5_to_lerobot(pixels) for camera, pixels in demo.images.items()}
-            vision = frontend.encode_images(images).numpy()
+            # Encode each distinct frame once: demos rendered every k-th step (`predvla demos
+            # --render-interval k`) repeat their images in between.
+            repeated = np.ones(ref.num_frames, dtype=bool)
+            repeated[0] = False
+            for pixels in images.values():
+                repeated[1:] &= (pixels[1:] == pixels[:-1]).all(axis=(1, 2, 3))
+            distinct = np.flatnonzero(~repeated)
+            vision = frontend.encode_images({c: pixels[distinct] for c, pixels in images.items()}).numpy()
+            vision = vision[np.cumsum(~repeated) - 1]
             for t in range(ref.num_frames):
                 frame = {camera: pixels[t] for camera, pixels in images.items()}
                 frame[OBS_STATE] = demo.state[t]

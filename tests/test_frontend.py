@@ -120,7 +120,7 @@ def test_artefact_records_identities_and_variance(frontend_dir):
     assert meta["language"]["components_with_variance"] == 2
     assert meta["vision"]["weights"] == {"source": "random", "path": None, "seed": 7}
     assert "RANDOM" in meta["vision"]["weights_description"]
-    assert meta["vision"]["precision"] == "bf16"
+    assert meta["vision"]["precision"] == "fp32"
     assert list(meta["vision"]["cameras"]) == list(CAMERAS)
     for info in meta["vision"]["cameras"].values():
         assert (info["input_dim"], info["n_components"], info["num_samples"]) == (512, 96, 30)

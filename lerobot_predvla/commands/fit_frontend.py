@@ -29,7 +29,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "dict, or 'random' (seeded frozen initialisation for offline runs).",
     )
     parser.add_argument("--vision-seed", type=int, default=0, help="Seed of --vision-weights random.")
-    parser.add_argument("--precision", choices=PRECISIONS, default="bf16", help="ResNet18 precision.")
+    parser.add_argument(
+        "--precision", choices=PRECISIONS, default="fp32",
+        help="ResNet18 precision: fp32 (default), or bf16 (faster only with native bfloat16, e.g. AMX).",
+    )
     parser.add_argument("--image-size", type=int, default=PreprocessingSpec.image_size, help="Resize side.")
     parser.add_argument("--language-dim", type=int, default=CONFIG_DEFAULTS["language_dim"])
     parser.add_argument("--vision-dim-per-camera", type=int, default=CONFIG_DEFAULTS["vision_dim_per_camera"])

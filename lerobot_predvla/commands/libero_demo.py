@@ -109,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
         _skip("2/6 front end", frontend)
     else:
         _run("2/6 front end", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", args.suite,
-                               "--vision-weights", args.vision_weights, "--out", str(frontend)])
+                               "--vision-weights", args.vision_weights, "--frame-stride", "4",
+                               "--out", str(frontend)])  # PCA on the rendered frames (every 4th)
     if dataset.exists():
         _skip("3/6 conversion", dataset)
     else:

@@ -29,7 +29,8 @@ class FitFrontendConfig:
         vision_weights: ResNet18 weights.
         language_dim: Language PCA components (Table 1: 64).
         vision_dim_per_camera: Visual PCA components per camera (Table 1: 96).
-        precision: Precision of the ResNet18 features, "bf16" (fast) or "fp32"; recorded and reused.
+        precision: Precision of the ResNet18 features, "fp32" or "bf16" (faster only with native bfloat16
+            hardware; ~4x slower emulated on AVX2-only CPUs); recorded and reused.
         preprocessing: Image preprocessing.
         frame_stride: Use every n-th frame for the visual PCA (1 = all frames).
         batch_size: Images per ResNet18 forward pass.
@@ -40,7 +41,7 @@ class FitFrontendConfig:
     suites: tuple[str, ...] = DEFAULT_SUITES
     language_dim: int = 64
     vision_dim_per_camera: int = 96
-    precision: str = "bf16"
+    precision: str = "fp32"
     preprocessing: PreprocessingSpec = field(default_factory=PreprocessingSpec)
     frame_stride: int = 1
     batch_size: int = 64

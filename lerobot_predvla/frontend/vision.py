@@ -104,7 +104,7 @@ class VisionEncoder:
 
     Args:
         weights: The weights to load (printed loudly).
-        precision: "bf16" runs under bfloat16 autocast (the fast path), "fp32" in full precision.
+        precision: "fp32" in full precision, or "bf16" under bfloat16 autocast (fast on CPUs with native bfloat16).
         channels_last: Use the channels-last memory format (faster convolutions on CPU).
         batch_size: Images per forward pass.
         device: Torch device.
@@ -114,7 +114,7 @@ class VisionEncoder:
     def __init__(
         self,
         weights: VisionWeights,
-        precision: str = "bf16",
+        precision: str = "fp32",
         channels_last: bool = True,
         batch_size: int = 64,
         device: str | torch.device = "cpu",
