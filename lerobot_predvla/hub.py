@@ -16,6 +16,7 @@ import importlib.metadata
 import json
 import re
 import shutil
+import sys
 import tempfile
 from dataclasses import dataclass
 from fnmatch import fnmatch
@@ -31,7 +32,12 @@ from .frontend.artefact import FRONTEND_META_DIR, METADATA_FILE, TENSORS_FILE
 from .posterior_store import POSTERIOR_STORE_FILE
 from .sweep import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
 
-CARD_TEMPLATE = Path(__file__).resolve().parent.parent / "hub_cards" / "predvla.md"
+# The source checkout's hub_cards/, or the copy a wheel installs under <prefix>/share (pyproject data-files).
+CARD_TEMPLATE = next(
+    (p for p in (Path(__file__).resolve().parent.parent / "hub_cards" / "predvla.md",
+                 Path(sys.prefix) / "share" / "lerobot_predvla" / "hub_cards" / "predvla.md") if p.is_file()),
+    Path(__file__).resolve().parent.parent / "hub_cards" / "predvla.md",
+)
 CARD_FILE = "README.md"
 FRONTEND_DIR = "predvla_frontend"  # the artefact's folder inside a checkpoint and a Hub repo
 PUSH_PATTERNS = ("*.safetensors", "*.json", "*.yaml", "*.md")  # what LeRobot's own push uploads
@@ -313,7 +319,7 @@ def render_card(
         ),
     }
     if not CARD_TEMPLATE.is_file():
-        raise HubError(f"{CARD_TEMPLATE}: model card template missing (run from a source checkout).")
+        raise HubError(f"{CARD_TEMPLATE}: model card template missing (reinstall lerobot_policy_predvla).")
     card = Template(CARD_TEMPLATE.read_text()).substitute(values)
     leftover = _LEFTOVER.findall(card)
     if leftover:
