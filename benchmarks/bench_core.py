@@ -1,0 +1,245 @@
+"""Speed of the recurrent core: eager reference vs fused fast path vs matmul-only floor, in one process.
+
+Training step (Eq. 10, forward + backward + gradient clip + both Adam optimizers) and one error-regression
+control step (Section 3.5: window W, n_itr iterations, full window). The floor replays, on random tensors of
+the same shapes and strides, exactly the matmuls the fast path issued, and nothing else.
+
+    python -m benchmarks.bench_core --quick
+"""
+
+import argparse
+import json
+import statistics
+import time
+from collections.abc import Callable
+from functools import partial
+
+import torch
+from torch import Tensor, nn
+from torch.utils._python_dispatch import TorchDispatchMode
+
+from benchmarks.reference import reference_rollout
+from lerobot_predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.error_regression import ErrorRegression
+from lerobot_predvla.modeling_predvla import masked_mean
+from lerobot_predvla.predictive_model import PredictiveModel
+
+MATMULS = {torch.ops.aten.mm.default, torch.ops.aten.addmm.default, torch.ops.aten.bmm.default,
+           torch.ops.aten.mm.out, torch.ops.aten.addmm.out}
+
+
+def randomised_model(config: PredVLAConfig, seed: int = 0) -> PredictiveModel:
+    """Default initialisation with non-zero biases and initial states, so that no pathway is silent."""
+    torch.manual_seed(seed)
+    model = PredictiveModel(config)
+    with torch.no_grad():
+        for p in model.parameters():
+            if p.dim() == 1:
+                p.normal_(0, 0.3)
+    return model
+
+
+def training_data(config: PredVLAConfig, batch: int, steps: int, seed: int = 0) -> dict[str, Tensor]:
+    """A synthetic batch of whole episodes, time-major, every step valid."""
+    g = torch.Generator().manual_seed(seed)
+    return {
+        "language": torch.randn(batch, config.language_dim, generator=g),
+        "vision": torch.randn(steps, batch, config.vision_dim, generator=g),
+        "state": torch.randn(steps, batch, config.proprio_dim, generator=g),
+        "action": torch.rand(steps, batch, config.action_dim, generator=g) * 1.8 - 0.9,
+        "c_q": 0.3 * torch.randn(steps, batch, 4 * config.latent_dim, generator=g),
+    }
+
+
+def training_loss(model: PredictiveModel, rollout: Callable, data: dict[str, Tensor], c_q: Tensor) -> Tensor:
+    """Eq. 10, as `PredVLAPolicy.forward` computes it, with the given rollout."""
+    cfg = model.config
+    traj = rollout(model.initial_state(c_q.shape[1]), model.language_term(data["language"]), c_q)
+    steps = torch.arange(c_q.shape[0])[:, None].expand(c_q.shape[:2])
+    valid = torch.ones(c_q.shape[:2], dtype=torch.bool)
+    fresh = steps % cfg.visual_refresh_interval == 0
+    eps_v, eps_q = model.prediction_errors(traj, data["vision"], data["state"])
+    complexity = model.complexity(c_q, model.priors(traj), cfg.complexity_weights)
+    return (
+        cfg.lambda_v * masked_mean(eps_v, fresh) + cfg.lambda_q * masked_mean(eps_q, valid)
+        + cfg.lambda_a * masked_mean(model.action_nll(traj, data["action"]), valid) + masked_mean(complexity, valid)
+    )
+
+
+def train_step_fn(model: PredictiveModel, rollout: Callable, data: dict[str, Tensor]) -> Callable[[], float]:
+    """One optimisation step: forward, backward, gradient clip, network Adam and posterior Adam (Table 2)."""
+    cfg = model.config
+    c_q = nn.Parameter(data["c_q"].clone())
+    network = torch.optim.Adam(model.parameters(), lr=cfg.optimizer_lr, weight_decay=cfg.optimizer_weight_decay)
+    posteriors = torch.optim.Adam([c_q], lr=cfg.posterior_lr)
+
+    def step() -> float:
+        network.zero_grad(set_to_none=True)
+        posteriors.zero_grad(set_to_none=True)
+        loss = training_loss(model, rollout, data, c_q)
+        loss.backward()
+        nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip_norm)
+        network.step()
+        posteriors.step()
+        return loss.item()
+
+    return step
+
+
+def control_stream(config: PredVLAConfig, batch: int, steps: int, seed: int = 0) -> tuple[Tensor, list]:
+    g = torch.Generator().manual_seed(seed)
+    language = torch.randn(batch, config.language_dim, generator=g)
+    obs = [(torch.randn(batch, config.vision_dim, generator=g), torch.randn(batch, config.proprio_dim, generator=g))
+           for _ in range(steps)]
+    return language, obs
+
+
+def control_step_fn(model: PredictiveModel, rollout: Callable, batch: int, seed: int = 0) -> Callable[[], Tensor]:
+    """One error-regression control step on a full window (filled with observe-only steps beforehand)."""
+    cfg = model.config
+    language, obs = control_stream(cfg, batch, cfg.er_window + 64, seed)
+    er = ErrorRegression(model, rollout)
+    for vision, proprio in obs[: cfg.er_window]:
+        er.observe(language, vision, proprio)
+    stream = iter(obs[cfg.er_window :])
+    return lambda: er(language, *next(stream))
+
+
+def median_ms(fn: Callable, repeats: int, warmup: int = 1) -> tuple[float, list[float]]:
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append((time.perf_counter() - start) * 1e3)
+    return statistics.median(times), times
+
+
+class MatmulRecorder(TorchDispatchMode):
+    """Records the shapes and strides of every matmul issued while active."""
+
+    def __init__(self):
+        super().__init__()
+        self.calls: list[tuple] = []
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        if func in MATMULS:
+            operands = args[:3] if func in (torch.ops.aten.addmm.default, torch.ops.aten.addmm.out) else args[:2]
+            self.calls.append((func.overloadpacket, tuple((x.shape, x.stride()) for x in operands)))
+        return func(*args, **(kwargs or {}))
+
+
+def floor_fn(fn: Callable) -> tuple[Callable[[], None], int]:
+    """A function issuing the same matmuls as one call of `fn`, on random operands, and nothing else."""
+    recorder = MatmulRecorder()
+    with recorder:
+        fn()
+    operands: dict = {}
+
+    def tensor(shape: torch.Size, stride: tuple[int, ...]) -> Tensor:
+        key = (tuple(shape), stride)
+        if key not in operands:
+            operands[key] = torch.empty_strided(shape, stride).normal_()
+        return operands[key]
+
+    calls = [(op, [tensor(*spec) for spec in specs]) for op, specs in recorder.calls]
+
+    def replay() -> None:
+        for op, args in calls:
+            op(*args)
+
+    return replay, len(calls)
+
+
+def frontend_ms(repeats: int) -> float:
+    """ResNet18 features of one frame (two 128 px cameras) at batch 1, bf16 channels-last (random weights)."""
+    from benchmarks.bench_frontend import encode, synthetic_frames
+    from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
+    from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
+
+    encoder = VisionEncoder(VisionWeights.parse("random"), "bf16", channels_last=True, batch_size=1, verbose=False)
+    cameras = [synthetic_frames(1, seed) for seed in (0, 1)]
+    return median_ms(partial(encode, encoder, cameras, PreprocessingSpec(), False), repeats, warmup=2)[0]
+
+
+def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps: int = 200) -> dict:
+    """Times every path, prints a table and returns the medians (ms) and ratios."""
+    torch.set_num_threads(threads)
+    config = PredVLAConfig(device="cpu")
+    model = randomised_model(config)
+    fast, ref = model.rollout, partial(reference_rollout, model)
+    reps_ref, reps_fast = (2, 5) if quick else (5, 15)
+    data = training_data(config, batch, steps)
+    results, spread = {}, {}
+
+    def record(key: str, fn: Callable, repeats: int, warmup: int = 1) -> None:
+        results[key], spread[key] = median_ms(fn, repeats, warmup)
+
+    record("train_step_ms_ref", train_step_fn(model, ref, data), reps_ref)
+    fast_step = train_step_fn(model, fast, data)
+    record("train_step_ms_fast", fast_step, reps_fast)
+    replay, results["train_matmuls"] = floor_fn(fast_step)
+    record("train_step_ms_floor", replay, reps_fast)
+    record("er_ms_ref_b1", control_step_fn(model, ref, 1), reps_ref)
+    fast_control = control_step_fn(model, fast, 1)
+    record("er_ms_fast_b1", fast_control, reps_fast, warmup=2)
+    replay, results["er_matmuls_b1"] = floor_fn(fast_control)
+    record("er_ms_floor_b1", replay, reps_fast)
+    fast_control = control_step_fn(model, fast, 10)
+    record("er_ms_fast_b10", fast_control, reps_fast, warmup=2)
+    replay, _ = floor_fn(fast_control)
+    record("er_ms_floor_b10", replay, reps_fast)
+    results["frontend_ms_b1"] = frontend_ms(reps_fast)
+    # The front end runs on every 4th control step (fresh visual observation): amortised per control step.
+    amortised = results["frontend_ms_b1"] / config.visual_refresh_interval
+    results["control_ms_fast_b1"] = results["er_ms_fast_b1"] + amortised
+
+    results.update(
+        threads=threads, batch=batch, steps=steps, window=config.er_window, er_iterations=config.er_iterations,
+        train_speedup=results["train_step_ms_ref"] / results["train_step_ms_fast"],
+        train_fast_over_floor=results["train_step_ms_fast"] / results["train_step_ms_floor"],
+        er_speedup_b1=results["er_ms_ref_b1"] / results["er_ms_fast_b1"],
+        er_fast_over_floor_b1=results["er_ms_fast_b1"] / results["er_ms_floor_b1"],
+        er_fast_over_floor_b10=results["er_ms_fast_b10"] / results["er_ms_floor_b10"],
+    )
+    print(f"PredVLA recurrent core, {threads} thread(s), medians over repeats (ms):")
+    rows = [
+        (f"training step B={batch} T={steps}", "train_step_ms"),
+        (f"error regression b1 W={config.er_window} n_itr={config.er_iterations}", "er_ms", "_b1"),
+        ("error regression b10", "er_ms", "_b10"),
+    ]
+    print(f"  {'':44s} {'reference':>10s} {'fast':>10s} {'floor':>10s} {'ref/fast':>9s} {'fast/floor':>10s}")
+    for label, prefix, *suffix in rows:
+        s = suffix[0] if suffix else ""
+        r, f, fl = (results.get(f"{prefix}_{kind}{s}") for kind in ("ref", "fast", "floor"))
+        cells = [f"{x:10.1f}" if x is not None else f"{'-':>10s}" for x in (r, f, fl)]
+        ratio = f"{r / f:9.2f}" if r is not None else f"{'-':>9s}"
+        print(f"  {label:44s} {' '.join(cells)} {ratio} {f / fl:10.2f}")
+    print(f"  front end b1 (2 cameras, 128 px, bf16): {results['frontend_ms_b1']:.1f} ms; "
+          f"control step b1 with it amortised over {config.visual_refresh_interval} steps: "
+          f"{results['control_ms_fast_b1']:.1f} ms")
+    print("  all timings (ms): " + "; ".join(f"{k} " + ",".join(f"{v:.0f}" for v in vs) for k, vs in spread.items()))
+    return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    return run(args)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--quick", action="store_true", help="fewer repeats (under a minute)")
+    parser.add_argument("--threads", type=int, default=1, help="torch.set_num_threads")
+
+
+def run(args: argparse.Namespace) -> int:
+    results = run_benchmark(quick=args.quick, threads=args.threads)
+    print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in results.items()}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

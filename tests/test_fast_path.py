@@ -1,0 +1,91 @@
+"""The fused recurrence (`PredictiveModel.rollout`) against the eager reference loop over `step`."""
+
+import dataclasses
+import sys
+from functools import partial
+from pathlib import Path
+
+import pytest
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository's `benchmarks` package
+
+from benchmarks.bench_core import control_stream, randomised_model, training_data, training_loss  # noqa: E402
+from benchmarks.reference import reference_rollout  # noqa: E402
+from lerobot_predvla import PredVLAConfig  # noqa: E402
+from lerobot_predvla.error_regression import ErrorRegression  # noqa: E402
+
+ABLATIONS = {
+    "full": {}, "A2 no bottleneck": {"use_bottleneck": False}, "A3 no efference": {"use_efference_copy": False}
+}
+
+
+def loss_and_grads(model, rollout, data) -> tuple[torch.Tensor, list[torch.Tensor]]:
+    """Eq. 10 and its gradient with respect to the network and the posteriors."""
+    c_q = data["c_q"].clone().requires_grad_(True)
+    loss = training_loss(model, rollout, data, c_q)
+    return loss, torch.autograd.grad(loss, [*model.parameters(), c_q])
+
+
+@pytest.mark.parametrize("overrides", ABLATIONS.values(), ids=ABLATIONS.keys())
+def test_training_loss_and_gradients_match_reference(overrides):
+    model = randomised_model(PredVLAConfig(device="cpu", **overrides))
+    data = training_data(model.config, batch=3, steps=24)
+    loss, grads = loss_and_grads(model, model.rollout, data)
+    ref_loss, ref_grads = loss_and_grads(model, partial(reference_rollout, model), data)
+    assert abs(loss.item() - ref_loss.item()) < 1e-5
+    for (name, _), g, ref in zip(model.named_parameters(), grads, ref_grads, strict=False):
+        assert (g - ref).abs().max() < 1e-5, name
+    assert (grads[-1] - ref_grads[-1]).abs().max() < 1e-5  # posteriors
+
+
+@pytest.mark.parametrize("overrides", ABLATIONS.values(), ids=ABLATIONS.keys())
+@pytest.mark.parametrize("with_posteriors", [True, False], ids=["c_q", "priors on the fly"])
+def test_every_output_and_gradient_matches_reference_in_float64(overrides, with_posteriors):
+    """All trajectory fields, the final state and every input's gradient, extra_ab included."""
+    model = randomised_model(PredVLAConfig(device="cpu", **overrides)).double()
+    g = torch.Generator().manual_seed(1)
+    steps, batch = 9, 2
+    language = torch.randn(batch, 64, generator=g, dtype=torch.float64)
+    c_q = torch.randn(steps, batch, 256, generator=g, dtype=torch.float64).requires_grad_(with_posteriors)
+    extra_ab = torch.randn(steps, batch, 256, generator=g, dtype=torch.float64, requires_grad=True)
+    results = []
+    for rollout in (model.rollout, partial(reference_rollout, model)):
+        traj = rollout(model.initial_state(batch), model.language_term(language),
+                       c_q if with_posteriors else None, extra_ab=extra_ab)
+        outputs = [*traj.d, traj.d_prev_top, traj.q_hat, traj.a_hat, *traj.action_params, *traj.final.h]
+        weights = torch.Generator().manual_seed(2)
+        scalar = sum((x * torch.randn(x.shape, generator=weights, dtype=x.dtype)).sum() for x in outputs)
+        inputs = [*model.parameters(), extra_ab] + ([c_q] if with_posteriors else [])
+        grads = torch.autograd.grad(scalar, inputs, allow_unused=True)
+        results.append([*outputs, *(torch.zeros(()) if x is None else x for x in grads)])
+    for fast, ref in zip(*results, strict=True):
+        torch.testing.assert_close(fast, ref, rtol=0, atol=1e-10)
+
+
+def test_rollout_without_posteriors_is_the_prior_loop():
+    """c_q=None: the posteriors equal the priors computed in module order, i.e. `step(..., u=None)`."""
+    model = randomised_model(PredVLAConfig(device="cpu"))
+    language = torch.randn(2, 64)
+    traj = model.rollout(model.initial_state(2), model.language_term(language), steps=7)
+    state, lang = model.initial_state(2), model.language_term(language)
+    for t in range(7):
+        state, _, prior = model.step(state, lang, None)
+        assert (traj.a_hat[t] - state.a_hat).abs().max() < 1e-5
+        assert (model.priors(traj)[t] - prior).abs().max() < 1e-5
+
+
+@pytest.mark.parametrize("dtype, tolerance", [(torch.float64, 1e-10), (torch.float32, 1e-5)])
+def test_error_regression_actions_match_reference(dtype, tolerance):
+    """Sliding window included (more steps than W) in float64. In fp32 the two paths differ by summation
+    order (~1e-7), which Adam's normalised steps amplify: a coordinate whose gradient is ~0 moves by +-lr
+    on its sign. fp32 is therefore compared over the first control steps only."""
+    config = dataclasses.replace(PredVLAConfig(device="cpu"), er_window=4, er_iterations=3)
+    model = randomised_model(config).to(dtype)
+    steps = 6 if dtype == torch.float64 else 2
+    language, obs = control_stream(config, batch=2, steps=steps)
+    actions = []
+    for rollout in (None, partial(reference_rollout, model)):
+        er = ErrorRegression(model, rollout)
+        actions.append(torch.stack([er(language.to(dtype), v.to(dtype), q.to(dtype)) for v, q in obs]))
+    assert (actions[0] - actions[1]).abs().max() < tolerance
