@@ -225,14 +225,9 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_arguments(parser)
-    args = parser.parse_args(argv)
-    return run(args)
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quick", action="store_true", help="fewer repeats (under a minute)")
     parser.add_argument("--threads", type=int, default=1, help="torch.set_num_threads")
+    return run(parser.parse_args(argv))
 
 
 def run(args: argparse.Namespace) -> int:

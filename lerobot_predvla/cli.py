@@ -18,6 +18,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.commands.sweep",
     "lerobot_predvla.commands.report",
     "lerobot_predvla.commands.push",
+    "lerobot_predvla.commands.bench",
 ]
 
 
