@@ -153,12 +153,15 @@ def floor_fn(fn: Callable) -> tuple[Callable[[], None], int]:
 
 
 def frontend_ms(repeats: int) -> float:
-    """ResNet18 features of one frame (two 128 px cameras) at batch 1, bf16 channels-last (random weights)."""
+    """ResNet18 features of one frame (two 128 px cameras) at batch 1, preprocessing included, random weights.
+
+    fp32 channels-last: without native bf16 instructions (this machine's CPU) bf16 is emulated and ~5x slower.
+    """
     from benchmarks.bench_frontend import encode, synthetic_frames
     from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
     from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
 
-    encoder = VisionEncoder(VisionWeights.parse("random"), "bf16", channels_last=True, batch_size=1, verbose=False)
+    encoder = VisionEncoder(VisionWeights.parse("random"), "fp32", channels_last=True, batch_size=1, verbose=False)
     cameras = [synthetic_frames(1, seed) for seed in (0, 1)]
     return median_ms(partial(encode, encoder, cameras, PreprocessingSpec(), False), repeats, warmup=2)[0]
 
@@ -216,7 +219,7 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
         cells = [f"{x:10.1f}" if x is not None else f"{'-':>10s}" for x in (r, f, fl)]
         ratio = f"{r / f:9.2f}" if r is not None else f"{'-':>9s}"
         print(f"  {label:44s} {' '.join(cells)} {ratio} {f / fl:10.2f}")
-    print(f"  front end b1 (2 cameras, 128 px, bf16): {results['frontend_ms_b1']:.1f} ms; "
+    print(f"  front end b1 (2 cameras, 128 px, fp32): {results['frontend_ms_b1']:.1f} ms; "
           f"control step b1 with it amortised over {config.visual_refresh_interval} steps: "
           f"{results['control_ms_fast_b1']:.1f} ms")
     print("  all timings (ms): " + "; ".join(f"{k} " + ",".join(f"{v:.0f}" for v in vs) for k, vs in spread.items()))
