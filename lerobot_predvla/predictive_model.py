@@ -56,8 +56,12 @@ class GMMActionHead(nn.Module):
         self.net = mlp(in_dim, hidden_dim, num_mixtures * (1 + 2 * action_dim))
 
     def forward(self, d: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        return self.from_hidden(self.net[1](self.net[0](d)))
+
+    def from_hidden(self, hidden: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """GMM parameters from the hidden layer (after its ReLU)."""
         k, a = self.num_mixtures, self.action_dim
-        out = self.net(d)
+        out = self.net[2](hidden)
         logits, means, scales = out.split([k, k * a, k * a], dim=-1)
         means = torch.tanh(means).unflatten(-1, (k, a))
         scales = (F.softplus(scales) + self.min_scale).unflatten(-1, (k, a))
@@ -237,17 +241,18 @@ class PredictiveModel(nn.Module):
             p[A_BOTTOM] = p[A_BOTTOM] + extra_ab
         cfg = self.config
         meta = Meta(self.alpha, cfg.use_efference_copy, cfg.num_mixtures, cfg.action_dim, cfg.proprio_dim)
-        d, q_hat, a_hat, h_final = recurrence(
+        d, q_hat, a_hat, hidden, h_final = recurrence(
             meta, p, state.h, state.d, state.a_hat, state.q_hat, self.fused_weights(c_q is None)
         )
         final = RecurrentState(h_final, tuple(x[-1] for x in d), a_hat[-1], q_hat[-1])
-        # Full GMM parameters (for the NLL) batched after the loop; their mode is the loop's a_hat.
+        # Full GMM parameters (for the NLL) batched after the loop from the loop's hidden layer; their mode
+        # is the loop's a_hat.
         return Trajectory(
             d=tuple(d),
             d_prev_top=torch.cat([state.d[T][None], d[T][:-1]]),
             q_hat=q_hat,
             a_hat=a_hat,
-            action_params=self.action_head(d[A_BOTTOM]),
+            action_params=self.action_head.from_hidden(hidden[..., self.config.head_hidden_dim :]),
             final=final,
         )
 

@@ -100,7 +100,7 @@ class _Recurrence(torch.autograd.Function):
         ctx.save_for_backward(*dbuf, *gbuf, *inbuf[1:], y1, out, abuf, index, *w)
         ctx.has_va = w.w_va is not None
         q_hat = out[..., : meta.proprio_dim].contiguous()
-        return (*(buf[1:] for buf in dbuf), q_hat, abuf, *h_final)
+        return (*(buf[1:] for buf in dbuf), q_hat, abuf, y1, *h_final)
 
     @staticmethod
     def backward(ctx, *grads: Tensor | None):
@@ -109,7 +109,7 @@ class _Recurrence(torch.autograd.Function):
         dbuf, gbuf, inbuf = saved[0:4], saved[4:8], (None, *saved[8:11])
         y1, out, abuf, index = saved[11:15]
         w = FusedWeights(*saved[15:])
-        g_d, g_q, g_a, g_h = grads[0:4], grads[4], grads[5], grads[6:10]
+        g_d, g_q, g_a, g_y1, g_h = grads[0:4], grads[4], grads[5], grads[6], grads[7:11]
         steps, batch = abuf.shape[:2]
         nq, k, na = meta.proprio_dim, meta.num_mixtures, meta.action_dim
         dims = [buf.shape[-1] for buf in dbuf]
@@ -125,7 +125,8 @@ class _Recurrence(torch.autograd.Function):
         ext_d = [None if g is None else g.unbind(0) for g in g_d]
         ext_q = None if g_q is None else g_q.unbind(0)
         ext_a = None if g_a is None else g_a.unbind(0)
-        decay = [1.0 - alpha for alpha in meta.alpha]
+        ext_y1 = None if g_y1 is None else g_y1.unbind(0)
+        decay = [abuf.new_tensor(1.0 - alpha) for alpha in meta.alpha]  # 0-dim: no scalar wrapping per step
         gh = [abuf.new_zeros((batch, n)) if g is None else g.clone() for g, n in zip(g_h, dims, strict=True)]
         carry = [abuf.new_zeros((batch, n)) for n in dims]  # gradient reaching d^l_{t-1} from step t
         carry_a, carry_q = abuf.new_zeros((batch, na)), abuf.new_zeros((batch, nq))
@@ -147,7 +148,10 @@ class _Recurrence(torch.autograd.Function):
             go[:, :nq] = carry_q if ext_q is None else carry_q + ext_q[i]
             ga = carry_a if ext_a is None else carry_a + ext_a[i]
             go[:, nq + k :].view(batch, k, na).scatter_(1, index_s[i], (ga * da[i]).unsqueeze(1))
-            torch.mm(go, w.w2, out=gy1_s[i]).mul_(relu_mask[i])
+            torch.mm(go, w.w2, out=gy1_s[i])
+            if ext_y1 is not None:
+                gy1_s[i].add_(ext_y1[i])
+            gy1_s[i].mul_(relu_mask[i])
             gin = module(A_BOTTOM, i, torch.addmm(carry[A_BOTTOM], gy1_s[i], w.w1), w.w_ab)
             carry[A_BOTTOM] = gin[:, :d_ab_]
             gin = module(A_TOP, i, carry[A_TOP] + gin[:, d_ab_:], w.w_at)
@@ -185,7 +189,11 @@ class _Recurrence(torch.autograd.Function):
 
 def recurrence(
     meta: Meta, p: list[Tensor], h: tuple[Tensor, ...], d: tuple[Tensor, ...], a: Tensor, q: Tensor, w: FusedWeights
-) -> tuple[list[Tensor], Tensor, Tensor, tuple[Tensor, ...]]:
-    """Run Eqs. 3-6 over p's steps: d^l for every step (time-major), q_hat, a_hat and the final h^l."""
+) -> tuple[list[Tensor], Tensor, Tensor, Tensor, tuple[Tensor, ...]]:
+    """Run Eqs. 3-6 over p's steps.
+
+    Returns, time-major, d^l of every module, q_hat, a_hat and the heads' hidden layer [q | action] (after
+    ReLU), and the final h^l.
+    """
     outs = _Recurrence.apply(meta, *p, *h, *d, a, q, *w)
-    return list(outs[0:4]), outs[4], outs[5], tuple(outs[6:10])
+    return list(outs[0:4]), outs[4], outs[5], outs[6], tuple(outs[7:11])
