@@ -79,7 +79,6 @@ def test_lerobot_eval_runs_predvla_on_libero(checkpoint, tmp_path):
     log = run([str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", "--env.type=predvla_libero",
                f"--env.task={SUITE}", "--env.task_ids=[0]", f"--env.episode_length={EPISODE_STEPS}",
                "--eval.n_episodes=1", "--eval.batch_size=1", "--eval.use_async_envs=false", "--policy.device=cpu",
-               "--eval.max_episodes_rendered=0",
                f"--output_dir={tmp_path}"])
     info = json.loads((tmp_path / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 1, log[-2000:]

@@ -143,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
                 "--policy.device=cpu", "--env.type=predvla_libero", f"--env.task={args.suite}",
                 f"--env.task_ids=[{tasks}]", f"--eval.n_episodes={args.episodes}",
                 f"--eval.batch_size={min(args.eval_batch_size, args.episodes)}", "--eval.use_async_envs=false",
-                "--eval.max_episodes_rendered=0", f"--output_dir={eval_dir}", *cap,
+                f"--output_dir={eval_dir}", *cap,
             ])
         results[mode] = per_task_success(info)
 

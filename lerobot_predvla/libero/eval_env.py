@@ -69,6 +69,12 @@ class SparseRenderLiberoEnv(LiberoEnv):
         observation[IMAGE_FRESH] = np.array([fresh], dtype=np.uint8)
         return observation
 
+    def render(self) -> np.ndarray:
+        """The first camera's latest images for lerobot-eval's videos, without rendering again."""
+        if self._images is None:
+            return super().render()
+        return next(iter(self._images.values()))[::-1, ::-1]  # upright, as LiberoEnv.render
+
     def reset(self, seed=None, **kwargs):
         self._steps_since_reset, self._images = 0, None
         return super().reset(seed=seed, **kwargs)
