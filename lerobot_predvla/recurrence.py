@@ -61,7 +61,11 @@ def _forward(meta: Meta, p: list[Tensor], h: list[Tensor], d: list[Tensor], a: T
     d_t, d_v, d_at, d_ab = d
     h_t, h_v, h_at, h_ab = h
     index = []
-    for i, (y1_i, out_i, a_i) in enumerate(zip(y1.unbind(0), out.unbind(0), abuf.unbind(0), strict=True)):
+    # Per-step views of the heads' output [q_hat | logits | means] and of the executed action.
+    q_s, logits_s = out[..., :nq].unbind(0), out[..., nq : nq + k].unbind(0)
+    means_s = out[..., nq + k :].unflatten(-1, (k, na)).unbind(0)
+    a_s, a_out = abuf.unbind(0), abuf.unsqueeze(2).unbind(0)
+    for i, (y1_i, out_i) in enumerate(zip(y1.unbind(0), out.unbind(0), strict=True)):
         # T (Eq. 4): h = (1 - 1/tau) h + 1/tau tanh(P + W_rec d_{t-1}), d = tanh(h).
         g = torch.addmm(psteps[T][i], d_t, wt[T], out=gsteps[T][i]).tanh_()
         h_t = torch.lerp(h_t, g, a_t)
@@ -84,9 +88,9 @@ def _forward(meta: Meta, p: list[Tensor], h: list[Tensor], d: list[Tensor], a: T
         d_ab = torch.tanh(h_ab, out=dsteps[A_BOTTOM][i])
         # Heads: q_hat and the mode of the GMM (mean of the highest-weight component), fed back by Eq. 6.
         torch.addmm(w.b2, torch.relu_(torch.addmm(w.b1, d_ab, w1_t, out=y1_i)), w2_t, out=out_i)
-        q = out_i[:, :nq]
-        idx = out_i[:, nq : nq + k].argmax(1).view(batch, 1, 1).expand(batch, 1, na)
-        a = torch.tanh(out_i[:, nq + k :].view(batch, k, na).gather(1, idx).squeeze(1), out=a_i)
+        idx = logits_s[i].argmax(1, keepdim=True).unsqueeze(2).expand(batch, 1, na)
+        torch.gather(means_s[i], 1, idx, out=a_out[i]).tanh_()
+        q, a = q_s[i], a_s[i]
         index.append(idx)
     return (dbuf, gbuf, inbuf, y1, out, abuf, torch.stack(index)), (h_t, h_v, h_at, h_ab)
 
@@ -113,56 +117,70 @@ class _Recurrence(torch.autograd.Function):
         steps, batch = abuf.shape[:2]
         nq, k, na = meta.proprio_dim, meta.num_mixtures, meta.action_dim
         dims = [buf.shape[-1] for buf in dbuf]
-        # Batched derivative factors: d/dh tanh(h) = 1 - d^2, d/dpre [h] = 1/tau (1 - g^2), ReLU mask, tanh of the mode.
-        dd = [(1 - buf[1:].square()).unbind(0) for buf in dbuf]
+        # Batched derivative factors: d/dh tanh(h) = 1 - d^2, d/dpre [h] = 1/tau (1 - g^2), ReLU mask, and
+        # d a / d means = one-hot(argmax) (1 - a^2) for the mode's tanh mean.
+        dd = [1 - buf[1:].square() for buf in dbuf]
         dg = [(alpha * (1 - buf.square())).unbind(0) for alpha, buf in zip(meta.alpha, gbuf, strict=True)]
         relu_mask = (y1 > 0).to(y1.dtype).unbind(0)
-        da = (1 - abuf.square()).unbind(0)
+        one_hot = abuf.new_zeros((steps, batch, k, na)).scatter_(2, index, 1.0)
+        da = (one_hot * (1 - abuf.square()).unsqueeze(2)).unbind(0)
+        # External gradients on d^l enter h^l as ext (1 - d^2), added with the decayed carry (Eqs. 3-4).
+        ext_h = [None if g is None else (g * x).unbind(0) for g, x in zip(g_d, dd, strict=True)]
+        dd = [x.unbind(0) for x in dd]
         gx_buf = [buf.new_empty(buf.shape) for buf in gbuf]  # gradient of each pre-activation
         gout = out.new_zeros(out.shape)
         gy1 = y1.new_empty(y1.shape)
-        gx, gout_s, gy1_s, index_s = [b.unbind(0) for b in gx_buf], gout.unbind(0), gy1.unbind(0), index.unbind(0)
-        ext_d = [None if g is None else g.unbind(0) for g in g_d]
+        gx, gy1_s = [b.unbind(0) for b in gx_buf], gy1.unbind(0)
+        gout_s, gout_q = gout.unbind(0), gout[..., :nq].unbind(0)
+        gout_means = gout[..., nq + k :].unflatten(-1, (k, na)).unbind(0)
         ext_q = None if g_q is None else g_q.unbind(0)
         ext_a = None if g_a is None else g_a.unbind(0)
         ext_y1 = None if g_y1 is None else g_y1.unbind(0)
-        decay = [abuf.new_tensor(1.0 - alpha) for alpha in meta.alpha]  # 0-dim: no scalar wrapping per step
+        decay = [1.0 - alpha for alpha in meta.alpha]
         gh = [abuf.new_zeros((batch, n)) if g is None else g.clone() for g, n in zip(g_h, dims, strict=True)]
+        for m in range(4):
+            if ext_h[m] is not None:
+                gh[m] = gh[m] + ext_h[m][-1]
         carry = [abuf.new_zeros((batch, n)) for n in dims]  # gradient reaching d^l_{t-1} from step t
         carry_a, carry_q = abuf.new_zeros((batch, na)), abuf.new_zeros((batch, nq))
         d_t_, d_v_, d_at_, d_ab_ = dims
         z_start = d_at_ + d_t_
+        split_ab = (d_ab_, d_at_)
+        split_at = (d_at_, d_t_, w.w_at.shape[1] - z_start) if w.w_va is not None else (d_at_, d_t_)
+        split_v = (d_v_, d_t_, na, nq) if meta.efference else (d_v_, d_t_)
 
         def module(m: int, i: int, gd: Tensor, weight: Tensor) -> Tensor:
             """Leaky-integrator backward (Eqs. 3-4) of module m at step i; returns the input gradient."""
-            if ext_d[m] is not None:
-                gd = gd + ext_d[m][i]
-            gh[m] = torch.addcmul(gh[m], gd, dd[m][i])
-            torch.mul(gh[m], dg[m][i], out=gx[m][i])
-            gh[m].mul_(decay[m])
+            gh_i = torch.addcmul(gh[m], gd, dd[m][i])
+            torch.mul(gh_i, dg[m][i], out=gx[m][i])
+            # Carry to step i - 1: (1 - 1/tau) gh_i, plus that step's external term.
+            no_ext = ext_h[m] is None or i == 0
+            gh[m] = torch.mul(gh_i, decay[m]) if no_ext else torch.add(ext_h[m][i - 1], gh_i, alpha=decay[m])
             return torch.mm(gx[m][i], weight)
 
         for i in reversed(range(steps)):
             # Heads: q_hat and the selected component's tanh mean (the argmax carries no gradient).
-            go = gout_s[i]
-            go[:, :nq] = carry_q if ext_q is None else carry_q + ext_q[i]
+            if ext_q is None:
+                gout_q[i].copy_(carry_q)
+            else:
+                torch.add(carry_q, ext_q[i], out=gout_q[i])
             ga = carry_a if ext_a is None else carry_a + ext_a[i]
-            go[:, nq + k :].view(batch, k, na).scatter_(1, index_s[i], (ga * da[i]).unsqueeze(1))
-            torch.mm(go, w.w2, out=gy1_s[i])
-            if ext_y1 is not None:
-                gy1_s[i].add_(ext_y1[i])
+            if meta.efference or ext_a is not None:
+                torch.mul(da[i], ga.unsqueeze(1), out=gout_means[i])
+            if ext_y1 is None:
+                torch.mm(gout_s[i], w.w2, out=gy1_s[i])
+            else:
+                torch.addmm(ext_y1[i], gout_s[i], w.w2, out=gy1_s[i])
             gy1_s[i].mul_(relu_mask[i])
-            gin = module(A_BOTTOM, i, torch.addmm(carry[A_BOTTOM], gy1_s[i], w.w1), w.w_ab)
-            carry[A_BOTTOM] = gin[:, :d_ab_]
-            gin = module(A_TOP, i, carry[A_TOP] + gin[:, d_ab_:], w.w_at)
-            carry[A_TOP], gd_t = gin[:, :d_at_], gin[:, d_at_:z_start]
-            gd_v = carry[V] if w.w_va is None else torch.addmm(carry[V], gin[:, z_start:], w.w_va)
-            gin = module(V, i, gd_v, w.w_v)
-            carry[V] = gin[:, :d_v_]
-            gd_t = gd_t + gin[:, d_v_ : d_v_ + d_t_]
-            if meta.efference:
-                carry_a, carry_q = gin[:, d_v_ + d_t_ : d_v_ + d_t_ + na], gin[:, d_v_ + d_t_ + na :]
-            carry[T] = module(T, i, carry[T] + gd_t, w.w_t)
+            carry[A_BOTTOM], gd_at = module(A_BOTTOM, i, torch.addmm(carry[A_BOTTOM], gy1_s[i], w.w1), w.w_ab).split(
+                split_ab, 1
+            )
+            carry[A_TOP], gd_t, *gz = module(A_TOP, i, carry[A_TOP] + gd_at, w.w_at).split(split_at, 1)
+            gd_v = torch.addmm(carry[V], gz[0], w.w_va) if gz else carry[V]
+            carry[V], gd_t_v, *efference = module(V, i, gd_v, w.w_v).split(split_v, 1)
+            if efference:
+                carry_a, carry_q = efference
+            carry[T] = module(T, i, carry[T] + gd_t + gd_t_v, w.w_t)
 
         needs = ctx.needs_input_grad[1:]
         grad_w = [None] * len(w)
