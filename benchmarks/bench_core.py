@@ -172,7 +172,7 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     config = PredVLAConfig(device="cpu")
     model = randomised_model(config)
     fast, ref = model.rollout, partial(reference_rollout, model)
-    reps_ref, reps_fast = (2, 5) if quick else (5, 15)
+    reps_ref, reps_fast = (1, 4) if quick else (5, 15)
     data = training_data(config, batch, steps)
     results, spread = {}, {}
 
