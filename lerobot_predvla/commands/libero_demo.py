@@ -43,7 +43,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=int, default=1000, help="lerobot-train steps")
     p.add_argument("--batch-size", type=int, default=8, help="lerobot-train batch size (episodes)")
     p.add_argument("--lr", type=float, default=1e-3, help="network learning rate (paper: 6e-5 over 30,000 steps)")
-    p.add_argument("--episodes", type=int, default=10, help="evaluation episodes per task and mode")
+    p.add_argument("--episodes", type=int, default=5, help="evaluation episodes per task and mode")
     p.add_argument("--eval-batch-size", type=int, default=5, help="parallel environments during evaluation")
     p.add_argument("--episode-length", type=int, default=None, help="step cap (paper: 600; default: suite cap)")
     p.set_defaults(func=run)
