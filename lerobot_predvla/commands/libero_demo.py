@@ -80,11 +80,13 @@ def plot_success(results: dict[str, dict[int, float]], suite: str, path: Path) -
 
     tasks = sorted(next(iter(results.values())))
     width = 0.8 / len(results)
-    fig, ax = plt.subplots(figsize=(1.5 + 1.2 * len(tasks), 3.5))
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.5 + 1.2 * len(tasks)), 3.5))
     for i, (mode, success) in enumerate(results.items()):
-        ax.bar([t + i * width for t in range(len(tasks))], [success[t] for t in tasks], width, label=mode)
+        bars = ax.bar([t + i * width for t in range(len(tasks))], [success[t] for t in tasks], width, label=mode)
+        ax.bar_label(bars, fmt="%.0f%%", fontsize=8)  # a 0% bar is otherwise invisible
     ax.set_xticks([t + width * (len(results) - 1) / 2 for t in range(len(tasks))], [f"task {t}" for t in tasks])
-    ax.set(ylabel="success (%)", ylim=(0, 100), title=f"PredVLA on {suite} (official init states)")
+    ax.set(ylabel="success (%)", ylim=(0, 105))
+    ax.set_title(f"PredVLA on {suite} (official init states)", fontsize=10)
     ax.legend()
     fig.tight_layout()
     tmp = path.with_suffix(".tmp.png")
