@@ -120,3 +120,36 @@ def test_predvla_libero_env_observations():
     venv.close()
     demo_env.close()
     assert fresh_flags == [1, 0, 0, 0, 1, 0]
+
+
+def test_published_files_reproduce_actions_front_end_included(checkpoint, tmp_path):
+    """A snapshot of exactly the files `predvla push` publishes acts like the checkpoint on raw observations."""
+    import shutil
+
+    from lerobot.policies.factory import make_pre_post_processors
+
+    from lerobot_predvla import PredVLAConfig, PredVLAPolicy
+    from lerobot_predvla.hub import collect_checkpoint
+
+    files, _ = collect_checkpoint(checkpoint)
+    assert any("predvla_frontend_processor" in name and name.endswith(".safetensors") for name in files)
+    snapshot = tmp_path / "snapshot"
+    for name, path in files.items():
+        (snapshot / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(path, snapshot / name)
+    rng = np.random.default_rng(1)
+    observations = [
+        {"observation.images.image": torch.from_numpy(rng.random((1, 3, 128, 128), dtype=np.float32)),
+         "observation.images.image2": torch.from_numpy(rng.random((1, 3, 128, 128), dtype=np.float32)),
+         "observation.state": torch.from_numpy(rng.normal(size=(1, 9)).astype(np.float32)),
+         OBS_IMAGE_FRESH: torch.tensor([[float(t % 4 == 0)]]), "task": [SOUP]}
+        for t in range(5)
+    ]
+    actions = []
+    for source in (checkpoint, snapshot):
+        config = PredVLAConfig.from_pretrained(source)
+        policy = PredVLAPolicy.from_pretrained(source, config=config)
+        pre, post = make_pre_post_processors(config, pretrained_path=str(source))
+        with torch.inference_mode():
+            actions.append(torch.cat([post(policy.select_action(pre(dict(o)))) for o in observations]))
+    torch.testing.assert_close(actions[0], actions[1], rtol=0, atol=0)
