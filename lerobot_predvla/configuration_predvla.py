@@ -15,6 +15,7 @@ MODULE_NAMES = ("T", "V", "A_top", "A_bottom")
 SHORT_HORIZON_TAU = (16.0, 8.0, 5.0, 2.0)
 LONG_HORIZON_TAU = (30.0, 14.0, 8.0, 2.0)
 LONG_HORIZON_SEQUENCE_LENGTH = 500
+CORRUPTION_CHANNELS = ("vision", "proprio")
 
 
 @PreTrainedConfig.register_subclass("predvla")
@@ -80,6 +81,17 @@ class PredVLAConfig(PreTrainedConfig):
             evaluation never reads this path.
         use_efference_copy: Keep the efference copy A -> V of the model's own previous action and
             proprioception predictions (Eq. 6); False is ablation A3.
+        er_corruption_channel: Observation channel corrupted before error regression (Section 4.4,
+            "Sensitivity to corrupted observations"): "vision" or "proprio"; None (default) corrupts nothing.
+            The other channel is left untouched.
+        er_corruption_alpha: Fraction alpha in [0, 1] of the window's observations of that channel replaced
+            (paper: 0.25, 0.5, 0.75, 1.0). Control step t is replaced iff floor((t+1) alpha) > floor(t alpha),
+            so every window of W steps holds exactly W alpha replaced steps when W alpha is an integer; for
+            vision the schedule counts visual refreshes, so the fraction applies to the fresh frames.
+        er_corruption_root: Root of a LeRobot dataset with the cached columns, source of the replacing
+            observations (an unrelated episode); required with `er_corruption_channel`.
+        er_corruption_episode: Episode of `er_corruption_root` whose observations replace the live ones: step t
+            of the live episode receives its step t (its last step once it has ended).
     """
 
     # Front end (Table 1).
@@ -124,6 +136,10 @@ class PredVLAConfig(PreTrainedConfig):
     er_complexity_weight: float = 1.0
     er_lambda_v: float = 1.0
     er_lambda_q: float = 1.0
+    er_corruption_channel: str | None = None
+    er_corruption_alpha: float = 0.0
+    er_corruption_root: str | None = None
+    er_corruption_episode: int = 0
 
     # Features are PCA outputs and raw proprioception (Section 3.1): identity. Actions are min-max
     # scaled to [-1, 1], the range of the tanh component means (LIBERO's actions already lie there).
@@ -155,6 +171,18 @@ class PredVLAConfig(PreTrainedConfig):
             raise ValueError(f"`visual_refresh_interval` must be >= 1, got {self.visual_refresh_interval}.")
         if self.sequence_length < 1:
             raise ValueError(f"`sequence_length` must be >= 1, got {self.sequence_length}.")
+        if self.er_corruption_channel not in (None, *CORRUPTION_CHANNELS):
+            raise ValueError(
+                f"`er_corruption_channel` must be one of {CORRUPTION_CHANNELS} or None, "
+                f"got {self.er_corruption_channel!r}."
+            )
+        if not 0.0 <= self.er_corruption_alpha <= 1.0:
+            raise ValueError(f"`er_corruption_alpha` must lie in [0, 1], got {self.er_corruption_alpha}.")
+        if self.er_corruption_channel is not None and self.er_corruption_root is None:
+            raise ValueError(
+                "`er_corruption_channel` needs `er_corruption_root`: a LeRobot dataset root with the cached columns "
+                "(e.g. --policy.er_corruption_root=datasets/libero_object --policy.er_corruption_episode=3)."
+            )
 
     @classmethod
     def long_horizon(cls, **kwargs) -> "PredVLAConfig":
@@ -181,34 +209,7 @@ class PredVLAConfig(PreTrainedConfig):
         return None  # Table 2: constant learning rate.
 
     def validate_features(self) -> None:
-        expected = {
-            OBS_VISION_FEATURES: self.vision_dim,
-            OBS_LANGUAGE_FEATURES: self.language_dim,
-            OBS_STATE: self.proprio_dim,
-        }
-        if not self.input_features:  # A bare config: PredVLA's inputs are fixed by its dimensions.
-            self.input_features = {
-                key: PolicyFeature(type=FeatureType.STATE, shape=(dim,)) for key, dim in expected.items()
-            }
-        for key, dim in expected.items():
-            feature = self.input_features.get(key)
-            if feature is None:
-                raise ValueError(
-                    f"PredVLA needs the input feature '{key}' of shape ({dim},); the dataset or environment "
-                    f"provides {sorted(self.input_features)}. Convert LIBERO data with `predvla convert`."
-                )
-            if tuple(feature.shape) != (dim,):
-                raise ValueError(f"Input feature '{key}' must have shape ({dim},), got {tuple(feature.shape)}.")
-        if not self.output_features:
-            self.output_features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(self.action_dim,))}
-        action = self.output_features.get(ACTION)
-        if action is None or tuple(action.shape) != (self.action_dim,):
-            shape = None if action is None else tuple(action.shape)
-            raise ValueError(f"Output feature '{ACTION}' must have shape ({self.action_dim},), got {shape}.")
-        # Only the cached features are inputs; images and other columns are not part of the policy.
-        self.input_features = {
-            key: PolicyFeature(type=FeatureType.STATE, shape=(dim,)) for key, dim in expected.items()
-        }
+        validate_cached_features(self, "PredVLA")
 
     @property
     def observation_delta_indices(self) -> None:
@@ -222,3 +223,39 @@ class PredVLAConfig(PreTrainedConfig):
     @property
     def reward_delta_indices(self) -> None:
         return None
+
+
+def validate_cached_features(config, policy_name: str) -> None:
+    """Check (and, for a bare config, set) the cached front-end inputs and the action output.
+
+    Shared by PredVLA and the policies of the paper's baselines and ladder, which read the same columns.
+    `config` needs `vision_dim`, `language_dim`, `proprio_dim` and `action_dim`.
+    """
+    expected = {
+        OBS_VISION_FEATURES: config.vision_dim,
+        OBS_LANGUAGE_FEATURES: config.language_dim,
+        OBS_STATE: config.proprio_dim,
+    }
+    if not config.input_features:  # A bare config: the inputs are fixed by the dimensions.
+        config.input_features = {
+            key: PolicyFeature(type=FeatureType.STATE, shape=(dim,)) for key, dim in expected.items()
+        }
+    for key, dim in expected.items():
+        feature = config.input_features.get(key)
+        if feature is None:
+            raise ValueError(
+                f"{policy_name} needs the input feature '{key}' of shape ({dim},); the dataset or environment "
+                f"provides {sorted(config.input_features)}. Convert LIBERO data with `predvla convert`."
+            )
+        if tuple(feature.shape) != (dim,):
+            raise ValueError(f"Input feature '{key}' must have shape ({dim},), got {tuple(feature.shape)}.")
+    if not config.output_features:
+        config.output_features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(config.action_dim,))}
+    action = config.output_features.get(ACTION)
+    if action is None or tuple(action.shape) != (config.action_dim,):
+        shape = None if action is None else tuple(action.shape)
+        raise ValueError(f"Output feature '{ACTION}' must have shape ({config.action_dim},), got {shape}.")
+    # Only the cached features are inputs; images and other columns are not part of the policy.
+    config.input_features = {
+        key: PolicyFeature(type=FeatureType.STATE, shape=(dim,)) for key, dim in expected.items()
+    }

@@ -10,6 +10,7 @@ from safetensors.torch import load_file
 from torch import Tensor
 
 from .configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, PredVLAConfig
+from .corruption import ObservationCorruption
 from .error_regression import ErrorRegression
 from .frontend.artefact import FRONTEND_META_DIR
 from .posterior_store import PosteriorStore
@@ -51,6 +52,7 @@ class PredVLAPolicy(PreTrainedPolicy):
                 self.sequences.vision.shape[0], config.sequence_length, self.model.posterior_dim
             )
         self._write_posteriors = True
+        self.corruption = ObservationCorruption.from_config(config)  # Section 4.4; None unless configured
         self.reset()
 
     # ----- parameters, saving, loading -------------------------------------------------------------
@@ -178,6 +180,7 @@ class PredVLAPolicy(PreTrainedPolicy):
     def reset(self) -> None:
         """Clear the error-regression window (called at every environment reset)."""
         self.error_regression = ErrorRegression(self.model)
+        self.control_step = 0
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
@@ -185,6 +188,9 @@ class PredVLAPolicy(PreTrainedPolicy):
 
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
         """One control step of error regression; works under lerobot-eval's `torch.inference_mode()`."""
+        if self.corruption is not None:  # the corrupted observation is what error regression sees
+            batch = self.corruption(self.control_step, batch)
+        self.control_step += 1
         with torch.inference_mode(False), torch.enable_grad():
             # Inputs created in inference mode cannot enter autograd: clone them out of it.
             inputs = [batch[k].clone() for k in (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE)]
