@@ -1,0 +1,28 @@
+"""Configuration of baseline B2, BC-RNN (LSTM), on PredVLA's cached inputs (Section 4.4, Table 4)."""
+
+from dataclasses import dataclass
+
+from lerobot.configs import PreTrainedConfig
+
+from .observation_policy import ObservationPolicyConfig
+
+BC_RNN_PAPER_PARAMETERS = 674_276  # Table 4, B2
+
+
+@PreTrainedConfig.register_subclass("predvla_bc_rnn")
+@dataclass
+class PredVLABCRNNConfig(ObservationPolicyConfig):
+    """BC-RNN (robomimic-style): an LSTM over [held vision 192; proprio 9; language 64] with PredVLA's GMM head.
+
+    Parameter reading: torch `nn.LSTM(265, 271)` (one layer, both bias vectors) and the two-layer GMM head
+    Linear(271, 256)-ReLU-Linear(256, 75) give 674,267 trainable parameters, 9 (0.001%) below the paper's
+    674,276; no reading with integer widths that we found is exact. Fields of the base class are documented in
+    `ObservationPolicyConfig`.
+
+    Args:
+        hidden_dim: LSTM state size (271 matches Table 4's count).
+        num_layers: Stacked LSTM layers (1).
+    """
+
+    hidden_dim: int = 271
+    num_layers: int = 1
