@@ -1,5 +1,19 @@
-"""Discovery name for LeRobot's plugin loader: importing it registers the PredVLA policy types."""
+"""Discovery name for LeRobot's plugin loader: importing it registers the PredVLA policy types.
+
+`predvla` (the paper's model and its ablations A1-A6), `predvla_bc_transformer` and `predvla_bc_rnn` (baselines
+B1-B4) and `predvla_ladder` (ladder rungs L2-L5, L2b).
+"""
 
 from lerobot_predvla import PredVLAConfig, PredVLAPolicy, make_predvla_pre_post_processors
+from lerobot_predvla.configuration_predvla_bc_rnn import PredVLABCRNNConfig
+from lerobot_predvla.configuration_predvla_bc_transformer import PredVLABCTransformerConfig
+from lerobot_predvla.configuration_predvla_ladder import PredVLALadderConfig
 
-__all__ = ["PredVLAConfig", "PredVLAPolicy", "make_predvla_pre_post_processors"]
+__all__ = [
+    "PredVLABCRNNConfig",
+    "PredVLABCTransformerConfig",
+    "PredVLAConfig",
+    "PredVLALadderConfig",
+    "PredVLAPolicy",
+    "make_predvla_pre_post_processors",
+]
