@@ -14,15 +14,16 @@ BC_RNN_PAPER_PARAMETERS = 674_276  # Table 4, B2
 class PredVLABCRNNConfig(ObservationPolicyConfig):
     """BC-RNN (robomimic-style): an LSTM over [held vision 192; proprio 9; language 64] with PredVLA's GMM head.
 
-    Parameter reading: torch `nn.LSTM(265, 271)` (one layer, both bias vectors) and the two-layer GMM head
-    Linear(271, 256)-ReLU-Linear(256, 75) give 674,267 trainable parameters, 9 (0.001%) below the paper's
-    674,276; no reading with integer widths that we found is exact. Fields of the base class are documented in
-    `ObservationPolicyConfig`.
+    Parameter reading: torch `nn.LSTM(265, 272)` (one layer, both bias vectors, zero initial state) and the
+    two-layer GMM head Linear(272, 256)-ReLU-Linear(256, 75) give 675,595 trainable parameters, 1,319 (+0.20%)
+    above the paper's 674,276 (width 271: 672,099, -0.32%). No natural reading we found (one or more layers,
+    one or two bias vectors, learnable initial states, input embedding) is exact. Fields of the base class are
+    documented in `ObservationPolicyConfig`.
 
     Args:
-        hidden_dim: LSTM state size (271 matches Table 4's count).
+        hidden_dim: LSTM state size (272: the closest to Table 4's count).
         num_layers: Stacked LSTM layers (1).
     """
 
-    hidden_dim: int = 271
+    hidden_dim: int = 272
     num_layers: int = 1
