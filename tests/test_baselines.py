@@ -169,7 +169,8 @@ def test_corruption_schedule_replaces_exactly_alpha_of_every_window(alpha):
 def test_corruption_reaches_error_regression_on_one_channel(channel, alpha, synthetic_dataset):
     """Exactly the scheduled steps of one channel come from the unrelated episode; the other is untouched."""
     policy = PredVLAPolicy(PredVLAConfig(
-        device="cpu", er_window=40, er_iterations=1, er_corruption_channel=channel, er_corruption_alpha=alpha,
+        device="cpu", module_dims=(8, 16, 16, 16), latent_dim=4, bottleneck_dim=4, head_hidden_dim=16,  # tiny
+        er_window=40, er_iterations=1, er_corruption_channel=channel, er_corruption_alpha=alpha,
         er_corruption_root=str(synthetic_dataset), er_corruption_episode=3,
     )).eval()
     stream = [observation(2, seed=t) for t in range(14)]
