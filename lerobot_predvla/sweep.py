@@ -101,6 +101,7 @@ class ConfigSpec:
             if not path.is_file():
                 raise SweepError(f"configuration {self.name}: policy file {path} not found.")
             fields = json.loads(path.read_text())
+            fields = dict(fields.get("policy", fields))  # a `lerobot-train --config_path` file nests the policy
             if "type" not in fields:
                 raise SweepError(f"{path}: expected a `type` field naming the policy type.")
             policy_type = fields.pop("type")

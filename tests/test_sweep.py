@@ -270,3 +270,13 @@ def test_the_paper_sweep_file_is_valid():
     assert sweep.settings.n_episodes == 50 and sweep.settings.episode_length == 600 and len(sweep.settings.seeds) == 14
     assert sweep.configs["A6"].checkpoint_from == "predvla" and sweep.configs["L2b"].branch
     assert len(sweep.runs(["predvla"])) == 56 and len(sweep.runs(["A1"])) == 21
+
+
+def test_paper_sweep_reads_every_policy_file():
+    """configs/policy/*.json are `lerobot-train --config_path` files; the sweep takes their nested policy."""
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")
+    base = Path(__file__).parents[1] / "configs" / "sweeps"
+    types = {name: spec.policy_args(base, "libero_object")[0] for name, spec in sweep.configs.items()}
+    assert types["B1"] == "--policy.type=predvla_bc_transformer" and types["B2"] == "--policy.type=predvla_bc_rnn"
+    assert types["L3"] == "--policy.type=predvla_ladder"
+    assert "--policy.chunk_size=8" in sweep.configs["B3"].policy_args(base, "libero_object")
