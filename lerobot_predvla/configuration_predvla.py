@@ -1,6 +1,7 @@
 """Configuration of the PredVLA policy (paper Tables 1 and 2)."""
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from lerobot.configs import PreTrainedConfig
 from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
@@ -10,12 +11,34 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 # Cached front-end columns written by the converter (`predvla convert`).
 OBS_VISION_FEATURES = "observation.vision_features"
 OBS_LANGUAGE_FEATURES = "observation.language_features"
+FRONTEND_META_DIR = "meta/predvla_frontend"  # the front-end artefact copy a converted dataset carries
 
 MODULE_NAMES = ("T", "V", "A_top", "A_bottom")
 SHORT_HORIZON_TAU = (16.0, 8.0, 5.0, 2.0)
 LONG_HORIZON_TAU = (30.0, 14.0, 8.0, 2.0)
 LONG_HORIZON_SEQUENCE_LENGTH = 500
 CORRUPTION_CHANNELS = ("vision", "proprio")
+
+
+def cached_feature_normalization() -> dict[str, NormalizationMode]:
+    """Features are PCA outputs and raw proprioception (Section 3.1): identity. Actions are min-max scaled to
+    [-1, 1], the range of the tanh component means (LIBERO's actions already lie there)."""
+    return {
+        "VISUAL": NormalizationMode.IDENTITY,
+        "STATE": NormalizationMode.IDENTITY,
+        "ENV": NormalizationMode.IDENTITY,
+        "ACTION": NormalizationMode.MIN_MAX,
+    }
+
+
+def use_dataset_frontend(config, dataset_root: Path) -> None:
+    """Point `config.frontend_dir` at the training dataset's artefact copy unless the user chose one.
+
+    Read by the processor factory, which lerobot-train calls after building the policy.
+    """
+    frontend = Path(dataset_root) / FRONTEND_META_DIR
+    if config.frontend_dir is None and frontend.is_dir():
+        config.frontend_dir = str(frontend)
 
 
 @PreTrainedConfig.register_subclass("predvla")
@@ -141,16 +164,7 @@ class PredVLAConfig(PreTrainedConfig):
     er_corruption_root: str | None = None
     er_corruption_episode: int = 0
 
-    # Features are PCA outputs and raw proprioception (Section 3.1): identity. Actions are min-max
-    # scaled to [-1, 1], the range of the tanh component means (LIBERO's actions already lie there).
-    normalization_mapping: dict[str, NormalizationMode] = field(
-        default_factory=lambda: {
-            "VISUAL": NormalizationMode.IDENTITY,
-            "STATE": NormalizationMode.IDENTITY,
-            "ENV": NormalizationMode.IDENTITY,
-            "ACTION": NormalizationMode.MIN_MAX,
-        }
-    )
+    normalization_mapping: dict[str, NormalizationMode] = field(default_factory=cached_feature_normalization)
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -9,10 +9,9 @@ from lerobot.utils.constants import OBS_STATE
 from safetensors.torch import load_file
 from torch import Tensor
 
-from .configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, PredVLAConfig
+from .configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, PredVLAConfig, use_dataset_frontend
 from .corruption import ObservationCorruption
 from .error_regression import ErrorRegression
-from .frontend.artefact import FRONTEND_META_DIR
 from .posterior_store import PosteriorStore
 from .predictive_model import PredictiveModel
 from .sequence_table import EpisodeSequences
@@ -43,10 +42,7 @@ class PredVLAPolicy(PreTrainedPolicy):
         self.sequences: EpisodeSequences | None = None
         self.posterior_store: PosteriorStore | None = None
         if dataset_meta is not None:
-            frontend = Path(dataset_meta.root) / FRONTEND_META_DIR
-            if config.frontend_dir is None and frontend.is_dir():
-                # Read by make_predvla_pre_post_processors, which lerobot-train calls after building the policy.
-                config.frontend_dir = str(frontend)
+            use_dataset_frontend(config, Path(dataset_meta.root))
             self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
             self.posterior_store = PosteriorStore(
                 self.sequences.vision.shape[0], config.sequence_length, self.model.posterior_dim

@@ -18,8 +18,13 @@ from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
 
-from .configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, validate_cached_features
-from .frontend.artefact import FRONTEND_META_DIR
+from .configuration_predvla import (
+    OBS_LANGUAGE_FEATURES,
+    OBS_VISION_FEATURES,
+    cached_feature_normalization,
+    use_dataset_frontend,
+    validate_cached_features,
+)
 from .sequence_table import EpisodeSequences
 
 BASELINE_TRAIN_STEPS = 50_000  # Section 4.4: baselines train for 50,000 steps (PredVLA: 30,000)
@@ -85,14 +90,7 @@ class ObservationPolicyConfig(PreTrainedConfig):
     grad_clip_norm: float = 1.0
 
     # Same normalisation as PredVLA: identity features, actions min-max scaled to [-1, 1].
-    normalization_mapping: dict[str, NormalizationMode] = field(
-        default_factory=lambda: {
-            "VISUAL": NormalizationMode.IDENTITY,
-            "STATE": NormalizationMode.IDENTITY,
-            "ENV": NormalizationMode.IDENTITY,
-            "ACTION": NormalizationMode.MIN_MAX,
-        }
-    )
+    normalization_mapping: dict[str, NormalizationMode] = field(default_factory=cached_feature_normalization)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -152,9 +150,7 @@ class ObservationPolicy(PreTrainedPolicy):
         self.config = config
         self.sequences: EpisodeSequences | None = None
         if dataset_meta is not None:
-            frontend = Path(dataset_meta.root) / FRONTEND_META_DIR
-            if config.frontend_dir is None and frontend.is_dir():
-                config.frontend_dir = str(frontend)
+            use_dataset_frontend(config, Path(dataset_meta.root))
             self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
 
     def log_parameter_count(self) -> None:

@@ -12,6 +12,7 @@ import torch
 from lerobot.configs import PreTrainedConfig
 from lerobot.datasets import LeRobotDatasetMetadata
 from lerobot.policies.factory import get_policy_class, make_policy, make_pre_post_processors
+from test_policy import observation
 
 import lerobot_policy_predvla  # noqa: F401  (registers the policy types, as LeRobot's plugin loader does)
 from lerobot_predvla import PredVLAConfig, PredVLAPolicy
@@ -42,13 +43,6 @@ def preset(name: str, **overrides) -> PreTrainedConfig:
     return PreTrainedConfig.get_choice_class(fields.pop("type"))(device="cpu", **fields)
 
 
-def observation(batch: int = 1, seed: int = 0) -> dict[str, torch.Tensor]:
-    g = torch.Generator().manual_seed(seed)
-    return {
-        "observation.language_features": torch.randn(batch, 64, generator=g),
-        "observation.vision_features": torch.randn(batch, 192, generator=g),
-        "observation.state": torch.randn(batch, 9, generator=g),
-    }
 
 
 def run(policy, observations: list[dict]) -> torch.Tensor:

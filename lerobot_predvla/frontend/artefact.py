@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 from safetensors.numpy import load_file, save_file
 
+from lerobot_predvla.configuration_predvla import FRONTEND_META_DIR  # noqa: F401  (re-exported)
 from lerobot_predvla.frontend.language import LANGUAGE_ENCODER_DIM, LANGUAGE_ENCODER_NAME
 from lerobot_predvla.frontend.pca import PCABasis
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
@@ -16,7 +17,6 @@ from lerobot_predvla.frontend.vision import VISION_ENCODER_DIM, VISION_ENCODER_N
 TENSORS_FILE = "frontend.safetensors"
 METADATA_FILE = "frontend.json"
 FORMAT = "predvla-frontend"
-FRONTEND_META_DIR = "meta/predvla_frontend"  # the copy a converted dataset carries
 FORMAT_VERSION = 1
 _ARRAYS = ("mean", "components", "explained_variance", "explained_variance_ratio")
 
