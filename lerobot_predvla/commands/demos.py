@@ -12,7 +12,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 
-def _task_ids(text: str) -> list[int]:
+def task_ids(text: str) -> list[int]:
     try:
         return [int(t) for t in text.split(",") if t.strip()]
     except ValueError as err:
@@ -24,7 +24,7 @@ def add_parser(subparsers) -> None:
                               description=__doc__)
     p.add_argument("--suite", default="libero_object",
                    choices=["libero_spatial", "libero_object", "libero_goal", "libero_10"])
-    p.add_argument("--tasks", type=_task_ids, default=None, help="task ids, e.g. 0,1 (default: all)")
+    p.add_argument("--tasks", type=task_ids, default=None, help="task ids, e.g. 0,1 (default: all)")
     p.add_argument("--per-task", type=int, default=10, help="successful demonstrations per task")
     p.add_argument("--max-attempts", type=int, default=None, help="episodes tried per task (default 3x)")
     p.add_argument("--max-steps", type=int, default=None, help="step cap per episode (default: suite cap)")

@@ -18,16 +18,11 @@ import sys
 import time
 from pathlib import Path
 
+from lerobot_predvla.commands.demos import task_ids
+
 BANNER = "=" * 78
 BIN = Path(sys.executable).parent
 MODES = {"error regression": 10, "open loop": 0}  # er_iterations
-
-
-def _task_ids(text: str) -> list[int]:
-    try:
-        return [int(t) for t in text.split(",") if t.strip()]
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"--tasks expects comma-separated integers, got {text!r}") from err
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -35,7 +30,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", type=Path, default=Path("outputs/libero_demo"), help="output directory")
     p.add_argument("--suite", default="libero_object", help="LIBERO suite")
-    p.add_argument("--tasks", type=_task_ids, default=[0, 1], help="task ids, e.g. 0,1")
+    p.add_argument("--tasks", type=task_ids, default=[0, 1], help="task ids, e.g. 0,1")
     p.add_argument("--per-task", type=int, default=15, help="expert demonstrations per task")
     p.add_argument("--vision-weights", default="random",
                    help="ResNet18 weights for the front end: 'imagenet' (the paper's; needs the torchvision "
