@@ -30,6 +30,11 @@ PAPER_EPISODE_LENGTH = 600  # Section 4: control-step cap per rollout
 PAPER_TRAIN_STEPS = 30_000
 PAPER_BATCH_SIZE = 32
 GROUPS = ("main", "baseline", "ladder", "ablation", "corruption")
+# The unrelated episode of a corruption run comes from another suite's dataset, so it is unrelated to every task
+# of the evaluated suite (Section 4.4: "observations from an unrelated episode").
+CORRUPTION_SOURCE = {"libero_spatial": "libero_goal", "libero_goal": "libero_object",
+                     "libero_object": "libero_spatial", "libero_10": "libero_spatial"}
+CORRUPTION_KEYS = {"channel", "alpha", "source_suite", "episode", "open_loop"}
 EVAL_ENV_TYPE = "predvla_libero"  # LeRobot's LIBERO env with PredVLA's proprioception (libero/eval_config.py)
 TRAIN_DONE_FILE = "predvla_sweep_train.json"  # written beside a finished training's checkpoints
 
@@ -73,7 +78,10 @@ class ConfigSpec:
         checkpoint_from: Evaluate this configuration's checkpoints instead of training (inference-time variants).
         compare_to: Ablations: the intact configuration for paired differences; ladder: the preceding rung.
         branch: Ladder side branch (dashed in the figure, not part of the main chain).
-        corruption: Corruption curves: `{"channel": "vision" | "proprio", "alpha": 0.25}`.
+        corruption: A corruption-curve point (Section 4.4): `{"channel": "vision" | "proprio", "alpha": 0.25}`, optional
+            `source_suite` (whose dataset holds the unrelated episode; default: another suite, see
+            `CORRUPTION_SOURCE`), `episode` (its episode index, default 0) and `open_loop` (the configuration whose
+            success the report draws as the open-loop line). Becomes `--policy.er_corruption_*` at evaluation.
         suites, seeds, steps, n_episodes: Per-configuration replacements of the sweep-wide values.
     """
 
@@ -210,12 +218,35 @@ class Sweep:
                 )
             if spec.checkpoint_from and self.configs[spec.checkpoint_from].checkpoint_from:
                 raise SweepError(f"{where}: configuration {spec.name}: checkpoint_from must name a trained config.")
+            if spec.corruption is not None:
+                self.validate_corruption(spec, where)
             unknown = set(self.suites_of(spec)) - set(SUITES)
             if unknown:
                 raise SweepError(f"{where}: configuration {spec.name}: unknown suites {sorted(unknown)}; use {SUITES}.")
             missing = [s for s in self.suites_of(spec) if s not in self.settings.datasets]
             if missing:
                 raise SweepError(f"{where}: `datasets` has no entry (repo_id, root) for suites {missing}.")
+
+    def validate_corruption(self, spec: ConfigSpec, where: Path) -> None:
+        c = spec.corruption
+        if not isinstance(c, dict) or c.get("channel") not in ("vision", "proprio") or "alpha" not in c:
+            raise SweepError(f"{where}: configuration {spec.name}: corruption needs channel (vision or proprio) and "
+                             f"alpha, got {c!r}.")
+        unknown = sorted(set(c) - CORRUPTION_KEYS)
+        if unknown:
+            raise SweepError(f"{where}: configuration {spec.name}: unknown corruption keys {unknown}; expected "
+                             f"{sorted(CORRUPTION_KEYS)}.")
+        if not 0.0 <= float(c["alpha"]) <= 1.0:
+            raise SweepError(f"{where}: configuration {spec.name}: corruption alpha {c['alpha']} is not in [0, 1].")
+        sources = {self.corruption_source(spec, suite) for suite in self.suites_of(spec)}
+        missing = sorted(sources - set(self.settings.datasets))
+        if missing:
+            raise SweepError(f"{where}: configuration {spec.name}: the corruption source suites {missing} have no "
+                             "entry in `datasets`.")
+
+    @staticmethod
+    def corruption_source(spec: ConfigSpec, suite: str) -> str:
+        return spec.corruption.get("source_suite") or CORRUPTION_SOURCE[suite]
 
     def suites_of(self, spec: ConfigSpec) -> list[str]:
         return spec.suites or self.settings.suites
@@ -385,6 +416,7 @@ class Runner:
             f"--policy.path={checkpoint}",
             f"--policy.device={s.eval_device}",
             *_as_args(spec.eval_overrides, "policy"),
+            *self.corruption_args(spec, run.suite),
             f"--env.type={s.env_type}",
             f"--env.task={run.suite}",
             f"--env.episode_length={s.episode_length}",
@@ -397,6 +429,20 @@ class Runner:
             *s.eval_args,
             *spec.eval_args,
         ]
+
+    def corruption_args(self, spec: ConfigSpec, suite: str) -> list[str]:
+        """`--policy.er_corruption_*` for a corruption point: the unrelated episode from the source suite's dataset."""
+        if spec.corruption is None:
+            return []
+        source = self.sweep.settings.datasets[self.sweep.corruption_source(spec, suite)]
+        if not source.get("root"):
+            raise SweepError(f"configuration {spec.name}: the corruption source dataset needs a local `root`.")
+        return _as_args({
+            "er_corruption_channel": spec.corruption["channel"],
+            "er_corruption_alpha": float(spec.corruption["alpha"]),
+            "er_corruption_root": str(self._path(source["root"])),
+            "er_corruption_episode": int(spec.corruption.get("episode", 0)),
+        }, "policy")
 
     def _path(self, value: str) -> Path:
         path = Path(value)

@@ -280,3 +280,32 @@ def test_paper_sweep_reads_every_policy_file():
     assert types["B1"] == "--policy.type=predvla_bc_transformer" and types["B2"] == "--policy.type=predvla_bc_rnn"
     assert types["L3"] == "--policy.type=predvla_ladder"
     assert "--policy.chunk_size=8" in sweep.configs["B3"].policy_args(base, "libero_object")
+
+
+def test_corruption_points_evaluate_with_an_unrelated_episode_of_another_suite(tmp_path):
+    corruption = {"name": "Cp25", "group": "corruption", "checkpoint_from": "predvla", "compare_to": "predvla",
+                  "corruption": {"channel": "proprio", "alpha": 0.25, "open_loop": "A6", "episode": 3},
+                  "suites": ["libero_object"]}
+    path = sweep_file(tmp_path, configs=[{"name": "predvla"}, corruption])
+    runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FakeLeRobot())
+    command = runner.eval_command(Run("Cp25", "libero_object", 0), tmp_path / "ckpt")
+    assert arg(command, "policy.er_corruption_channel") == "proprio"
+    assert arg(command, "policy.er_corruption_alpha") == "0.25"
+    assert arg(command, "policy.er_corruption_episode") == "3"
+    # libero_object is corrupted from libero_spatial's dataset, libero_spatial from libero_goal's (missing here).
+    assert arg(command, "policy.er_corruption_root") == str((tmp_path / "data" / "libero_spatial").resolve())
+    assert arg(runner.eval_command(Run("predvla", "libero_object", 0), tmp_path / "ckpt"),
+               "policy.er_corruption_channel") is None
+    with pytest.raises(SweepError, match="corruption source suites \\['libero_goal'\\]"):
+        Sweep.load(sweep_file(tmp_path, configs=[{"name": "predvla"}, {**corruption, "suites": ["libero_spatial"]}]))
+    with pytest.raises(SweepError, match="channel"):
+        Sweep.load(sweep_file(tmp_path, configs=[{"name": "predvla"}, {**corruption, "corruption": {"alpha": 1}}]))
+    runner.run(progress=False)
+    record = json.loads(runner.record_path(Run("Cp25", "libero_object", 0)).read_text())
+    assert record["group"] == "corruption" and record["corruption"]["alpha"] == 0.25
+
+
+def test_the_paper_sweep_has_every_corruption_point():
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")
+    points = {(s.corruption["channel"], s.corruption["alpha"]) for s in sweep.configs.values() if s.corruption}
+    assert points == {(c, a) for c in ("vision", "proprio") for a in (0.25, 0.5, 0.75, 1.0)}
