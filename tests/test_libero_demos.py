@@ -82,3 +82,12 @@ def test_expert_episode_to_hdf5(libero, tmp_path):
         np.testing.assert_allclose(d0["obs/ee_pos"][()], d0["obs/ee_states"][:, :3])
         assert d0["obs/gripper_states"][0, 0] > 0.03  # gripper starts open
         assert "<mujoco" in d0.attrs["model_file"]
+
+
+def test_a_stale_config_names_the_file_and_key(tmp_path, monkeypatch):
+    from lerobot_predvla.libero.env import task_spec
+
+    (tmp_path / "config.yaml").write_text(f"bddl_files: {tmp_path / 'gone'}\n")
+    monkeypatch.setenv("LIBERO_CONFIG_PATH", str(tmp_path))
+    with pytest.raises(RuntimeError, match=r"config.yaml: `bddl_files` is .*gone.*make libero"):
+        task_spec(SUITE, TASK_ID)

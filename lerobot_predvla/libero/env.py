@@ -23,6 +23,13 @@ def _libero():
     config = Path(os.environ.get("LIBERO_CONFIG_PATH", Path.home() / ".libero")) / "config.yaml"
     if not config.is_file():
         raise RuntimeError(f"{config} missing ({INSTALL_HINT})")
+    import yaml
+
+    # The config is per user, not per venv: another checkout's install may have pointed it at its own venv.
+    bddl = Path(yaml.safe_load(config.read_text()).get("bddl_files", ""))
+    if not bddl.is_dir():
+        raise RuntimeError(f"{config}: `bddl_files` is {bddl}, which does not exist (a stale config from another "
+                           f"environment?); run `make libero` in this checkout to rewrite it")
     try:
         import libero.libero as libero_pkg
         from libero.libero import benchmark
