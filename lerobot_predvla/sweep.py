@@ -373,17 +373,21 @@ class Runner:
         return self.runs_dir / "logs" / name / suite / f"seed{seed}.{stage}.log"
 
     # ----- commands ---------------------------------------------------------------------------------------
+    def launcher(self) -> list[str]:
+        """`lerobot-train`, or LeRobot's multi-GPU path `accelerate launch --multi_gpu` for several processes."""
+        procs = self.sweep.settings.accelerate_processes
+        if procs == 1:
+            return [self.lerobot_train]
+        return [self.accelerate, "launch", "--multi_gpu", f"--num_processes={procs}", self.lerobot_train]
+
     def train_command(self, spec: ConfigSpec, suite: str, seed: int) -> list[str]:
         s = self.sweep.settings
         dataset = s.datasets[suite]
         procs = s.accelerate_processes
         if s.batch_size % procs:
             raise SweepError(f"batch_size {s.batch_size} is not divisible by accelerate_processes {procs}.")
-        launcher = [self.lerobot_train] if procs == 1 else [
-            self.accelerate, "launch", "--multi_gpu", f"--num_processes={procs}", self.lerobot_train,
-        ]
         return [
-            *launcher,
+            *self.launcher(),
             *spec.policy_args(self.sweep.base_dir, suite),
             f"--dataset.repo_id={dataset['repo_id']}",
             *([f"--dataset.root={self._path(dataset['root'])}"] if dataset.get("root") else []),
@@ -401,12 +405,8 @@ class Runner:
         ]
 
     def resume_command(self, train_dir: Path) -> list[str]:
-        s = self.sweep.settings
-        launcher = [self.lerobot_train] if s.accelerate_processes == 1 else [
-            self.accelerate, "launch", "--multi_gpu", f"--num_processes={s.accelerate_processes}", self.lerobot_train,
-        ]
         config = train_dir / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
-        return [*launcher, f"--config_path={config}", "--resume=true"]
+        return [*self.launcher(), f"--config_path={config}", "--resume=true"]
 
     def eval_command(self, run: Run, checkpoint: Path) -> list[str]:
         s = self.sweep.settings
