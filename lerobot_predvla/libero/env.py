@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_predvla.libero.install import config_file
+
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
@@ -20,7 +22,7 @@ INSTALL_HINT = "LIBERO is not installed in this venv: run `make libero`"
 
 def _libero():
     """Import libero.libero, failing with the install hint (never prompting) if it is not set up."""
-    config = Path(os.environ.get("LIBERO_CONFIG_PATH", Path.home() / ".libero")) / "config.yaml"
+    config = config_file()
     if not config.is_file():
         raise RuntimeError(f"{config} missing ({INSTALL_HINT})")
     import yaml

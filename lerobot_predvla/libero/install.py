@@ -92,10 +92,14 @@ def link_assets() -> Path:
     return target
 
 
+def config_file() -> Path:
+    """LIBERO's config, `$LIBERO_CONFIG_PATH/config.yaml` (default `~/.libero`), where hf-libero reads it."""
+    return Path(os.environ.get("LIBERO_CONFIG_PATH", Path.home() / ".libero")) / "config.yaml"
+
+
 def write_config() -> Path:
     """Write `$LIBERO_CONFIG_PATH/config.yaml` so `import libero.libero` never calls input()."""
     root = _package_dir("libero") / "libero"
-    config_dir = Path(os.environ.get("LIBERO_CONFIG_PATH", Path.home() / ".libero"))
     paths = {
         "benchmark_root": root,
         "bddl_files": root / "bddl_files",
@@ -106,11 +110,11 @@ def write_config() -> Path:
     import yaml  # a LeRobot dependency, present once pip_install() ran
 
     text = yaml.safe_dump({k: str(v) for k, v in paths.items()})
-    config = config_dir / "config.yaml"
+    config = config_file()
     if config.is_file() and config.read_text() == text:
         log(f"config: {config} up to date")
         return config
-    config_dir.mkdir(parents=True, exist_ok=True)
+    config.parent.mkdir(parents=True, exist_ok=True)
     config.write_text(text)
     log(f"config: wrote {config}")
     return config
