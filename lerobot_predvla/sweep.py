@@ -243,6 +243,10 @@ class Sweep:
         if missing:
             raise SweepError(f"{where}: configuration {spec.name}: the corruption source suites {missing} have no "
                              "entry in `datasets`.")
+        remote = sorted(s for s in sources if not self.settings.datasets[s].get("root"))
+        if remote:
+            raise SweepError(f"{where}: configuration {spec.name}: the corruption source datasets of {remote} need "
+                             "a local `root`.")
 
     @staticmethod
     def corruption_source(spec: ConfigSpec, suite: str) -> str:
@@ -435,8 +439,6 @@ class Runner:
         if spec.corruption is None:
             return []
         source = self.sweep.settings.datasets[self.sweep.corruption_source(spec, suite)]
-        if not source.get("root"):
-            raise SweepError(f"configuration {spec.name}: the corruption source dataset needs a local `root`.")
         return _as_args({
             "er_corruption_channel": spec.corruption["channel"],
             "er_corruption_alpha": float(spec.corruption["alpha"]),

@@ -307,6 +307,9 @@ def test_corruption_points_evaluate_with_an_unrelated_episode_of_another_suite(t
         Sweep.load(sweep_file(tmp_path, configs=[{"name": "predvla"}, {**corruption, "suites": ["libero_spatial"]}]))
     with pytest.raises(SweepError, match="channel"):
         Sweep.load(sweep_file(tmp_path, configs=[{"name": "predvla"}, {**corruption, "corruption": {"alpha": 1}}]))
+    hub_only = {s: {"repo_id": f"local/{s}"} for s in ("libero_object", "libero_spatial")}
+    with pytest.raises(SweepError, match=r"corruption source datasets of \['libero_spatial'\] need a local `root`"):
+        Sweep.load(sweep_file(tmp_path, datasets=hub_only, configs=[{"name": "predvla"}, corruption]))
     runner.run(progress=False)
     record = json.loads(runner.record_path(Run("Cp25", "libero_object", 0)).read_text())
     assert record["group"] == "corruption" and record["corruption"]["alpha"] == 0.25
