@@ -21,7 +21,7 @@ from torch.utils._python_dispatch import TorchDispatchMode
 from benchmarks.reference import reference_rollout
 from lerobot_predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.error_regression import ErrorRegression
-from lerobot_predvla.modeling_predvla import masked_mean
+from lerobot_predvla.modeling_predvla import masked_mean, training_complexity
 from lerobot_predvla.predictive_model import PredictiveModel
 
 MATMULS = {torch.ops.aten.mm.default, torch.ops.aten.addmm.default, torch.ops.aten.bmm.default,
@@ -62,7 +62,8 @@ def training_loss(model: PredictiveModel, rollout: Callable, data: dict[str, Ten
     complexity = model.complexity(c_q, model.priors(traj), cfg.complexity_weights)
     return (
         cfg.lambda_v * masked_mean(eps_v, fresh) + cfg.lambda_q * masked_mean(eps_q, valid)
-        + cfg.lambda_a * masked_mean(model.action_nll(traj, data["action"]), valid) + masked_mean(complexity, valid)
+        + cfg.lambda_a * masked_mean(model.action_nll(traj, data["action"]), valid)
+        + training_complexity(complexity, valid, cfg.complexity_reduction)
     )
 
 

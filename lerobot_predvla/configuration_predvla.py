@@ -18,6 +18,7 @@ SHORT_HORIZON_TAU = (16.0, 8.0, 5.0, 2.0)
 LONG_HORIZON_TAU = (30.0, 14.0, 8.0, 2.0)
 LONG_HORIZON_SEQUENCE_LENGTH = 500
 CORRUPTION_CHANNELS = ("vision", "proprio")
+COMPLEXITY_REDUCTIONS = ("sum", "mean")  # training C of Eq. 10: summed over the sequence, or its mean
 
 
 def cached_feature_normalization() -> dict[str, NormalizationMode]:
@@ -90,6 +91,11 @@ class PredVLAConfig(PreTrainedConfig):
         lambda_a: Weight of the action negative log-likelihood (Eq. 10; Table 2: 1).
         complexity_weights: w_l of (T, V, A_top, A_bottom) in the training complexity term (Eq. 8;
             Table 2: (0.05, 0.02, 0.02, 0.01)).
+        complexity_reduction: How the training loss reduces C_t over a sequence. "sum" (default): C is the
+            sum of C_t over the sequence's valid steps, as in the free energy of Eq. 9, since Eq. 10 puts the
+            mask-normalised bar on the errors and the NLL but not on C; averaged over the batch. "mean": the
+            mask-normalised mean, like the other terms (about T times weaker; it leaves the priors far from
+            the posteriors on short schedules, see the README).
         er_window: Error-regression window W in control steps (Table 2: 40).
         er_iterations: Adam iterations n_itr per control step (Table 2: 10). 0 is exact open loop.
         er_lr: Adam step size eta of error regression (Table 2: 0.05).
@@ -151,6 +157,7 @@ class PredVLAConfig(PreTrainedConfig):
     lambda_q: float = 1.0
     lambda_a: float = 1.0
     complexity_weights: tuple[float, float, float, float] = (0.05, 0.02, 0.02, 0.01)
+    complexity_reduction: str = "sum"
 
     # Online error regression (Table 2).
     er_window: int = 40
@@ -175,6 +182,10 @@ class PredVLAConfig(PreTrainedConfig):
                             ("complexity_weights", self.complexity_weights)):
             if len(value) != len(MODULE_NAMES):
                 raise ValueError(f"`{name}` needs one value per module {MODULE_NAMES}, got {value}.")
+        if self.complexity_reduction not in COMPLEXITY_REDUCTIONS:
+            raise ValueError(
+                f"`complexity_reduction` must be one of {COMPLEXITY_REDUCTIONS}, got {self.complexity_reduction!r}."
+            )
         if min(self.tau) < 1.0:
             raise ValueError(f"`tau` values must be >= 1 (Eq. 3), got {self.tau}.")
         if self.er_window < 1 or self.er_iterations < 0:

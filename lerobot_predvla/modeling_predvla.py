@@ -23,6 +23,14 @@ def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
     return (x * mask).sum() / mask.sum().clamp_min(1.0)
 
 
+def training_complexity(complexity: Tensor, mask: Tensor, reduction: str) -> Tensor:
+    """C of Eq. 10 from the per-step C_t (time, batch): Eq. 10 puts no bar on C, so by default ("sum") it is
+    summed over each sequence's valid steps as in Eq. 9 and averaged over the batch; "mean" is the bar."""
+    if reduction == "mean":
+        return masked_mean(complexity, mask)
+    return (complexity * mask.to(complexity.dtype)).sum() / mask.shape[1]
+
+
 class PredVLAPolicy(PreTrainedPolicy):
     """PredVLA: language-conditioned predictive-coding policy (paper Section 3).
 
@@ -164,7 +172,7 @@ class PredVLAPolicy(PreTrainedPolicy):
             "vision_error": masked_mean(eps_v, fresh),
             "proprio_error": masked_mean(eps_q, valid),
             "action_nll": masked_mean(nll, valid),
-            "complexity": masked_mean(complexity, valid),
+            "complexity": training_complexity(complexity, valid, cfg.complexity_reduction),
         }
         loss = (
             cfg.lambda_v * terms["vision_error"] + cfg.lambda_q * terms["proprio_error"]

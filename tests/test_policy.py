@@ -73,6 +73,7 @@ def test_defaults_match_tables_1_and_2():
     assert (c.optimizer_lr, c.posterior_lr, c.optimizer_weight_decay) == (6e-5, 1e-2, 1e-4)
     assert (c.train_batch_size, c.train_steps, c.sequence_length) == (32, 30_000, 200)
     assert (c.lambda_v, c.lambda_q, c.lambda_a, c.complexity_weights) == (1, 1, 1, (0.05, 0.02, 0.02, 0.01))
+    assert c.complexity_reduction == "sum"  # Eq. 10: C carries no mask-normalised bar
     assert (c.er_window, c.er_iterations, c.er_lr, c.er_complexity_weight) == (40, 10, 0.05, 1.0)
     assert c.get_scheduler_preset() is None and c.get_optimizer_preset().grad_clip_norm > 0
     long = PredVLAConfig.long_horizon()
@@ -201,6 +202,34 @@ def test_padded_and_non_refresh_steps_contribute_nothing(trained_policy):
     assert not torch.equal(loss_and_grads()[0], reference[0])
     policy.sequences = saved
     policy.eval()
+
+
+def test_training_complexity_is_summed_over_each_sequence(trained_policy):
+    """Eq. 10 puts no bar on C: C = sum over a sequence's valid steps of C_t (Eq. 8), averaged over the batch."""
+    policy, episodes = trained_policy, torch.tensor([0, 3, 6])
+    weights = torch.tensor(policy.config.complexity_weights)
+    with torch.no_grad():
+        _, terms = policy.forward({"episode_index": episodes})
+        seq = policy.sequences.batch(episodes, torch.device("cpu"))
+        c_q = policy.posterior_store.gather(episodes)
+        traj = policy.model.rollout(
+            policy.model.initial_state(len(episodes)), policy.model.language_term(seq["language"]), c_q
+        )
+        c_p = policy.model.priors(traj)
+    per_module = (c_q - c_p).unflatten(-1, (4, policy.config.latent_dim)).pow(2).sum(-1)  # (T, B, 4)
+    c_t = 0.5 * (per_module * weights).sum(-1)
+    expected = (c_t * seq["valid"]).sum(0).mean()
+    assert terms["complexity"] == pytest.approx(expected.item(), rel=1e-5)
+    policy.config.complexity_reduction = "mean"  # the per-step reading, kept as an option
+    try:
+        with torch.no_grad():
+            _, mean_terms = policy.forward({"episode_index": episodes})
+    finally:
+        policy.config.complexity_reduction = "sum"
+    assert mean_terms["complexity"] == pytest.approx((c_t * seq["valid"]).sum().item() / seq["valid"].sum().item(),
+                                                     rel=1e-5)
+    with pytest.raises(ValueError, match="complexity_reduction"):
+        PredVLAConfig(complexity_reduction="max")
 
 
 def test_posteriors_have_their_own_parameter_group(trained_policy):
