@@ -274,7 +274,7 @@ def test_the_paper_sweep_file_is_valid():
 
 def test_the_libero_demo_sweep_file_is_valid():
     sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "libero_demo.yaml")
-    assert sweep.settings.train_device == "cpu" and sweep.settings.eval_args == ["--env.task_ids=[0,1]"]
+    assert sweep.settings.train_device == "cpu" and sweep.settings.eval_args == ["--env.task_ids=[0]"]
     assert len(sweep.runs()) == 6 and sweep.configs["A4"].compare_to == "predvla"
     assert sweep.settings.datasets["libero_object"]["root"].endswith("outputs/libero_demo/dataset")
 
