@@ -16,7 +16,8 @@ POS_SCALE = 0.05  # OSC_POSE output_max for xyz (m per action unit)
 ROT_SCALE = 0.5  # OSC_POSE output_max for rotation (rad per action unit)
 OPEN, CLOSE = -1.0, 1.0
 MAX_FINGER_SPAN = 0.075  # wider objects are grasped at their rim
-SUPPORTED_PREDICATES = ("in", "on")
+DOWN = np.array([0.0, 0.0, -1.0])
+SKILL_ORDER = {"open": 0, "turnon": 0, "in": 1, "on": 1, "close": 2}  # plan order of goal predicates
 
 Skill = Iterator[np.ndarray]
 
@@ -39,13 +40,42 @@ def _wrap_half_pi(angle: float) -> float:
     return float((angle + np.pi / 2) % np.pi - np.pi / 2)
 
 
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / (np.linalg.norm(v) + 1e-9)
+
+
+def _tilt(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation matrix taking unit vector `a` onto unit vector `b` (Rodrigues)."""
+    n, c = np.cross(a, b), float(a @ b)
+    k = np.array([[0, -n[2], n[1]], [n[2], 0, -n[0]], [-n[1], n[0], 0]])
+    return np.eye(3) + k + k @ k / (1 + c) if c > -0.999 else -np.eye(3)
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation matrix of `angle` about unit vector `axis`."""
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def _rotation_error(z_now: np.ndarray, f_now: np.ndarray, z_goal: np.ndarray, f_goal: np.ndarray) -> np.ndarray:
+    """World-frame axis-angle turning the gripper frame (approach z, finger f) onto the goal frame."""
+    now = np.column_stack([f_now, np.cross(z_now, f_now), z_now])
+    goal = np.column_stack([f_goal, np.cross(z_goal, f_goal), z_goal])
+    r = goal @ now.T
+    angle = np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))
+    if angle < 1e-6:
+        return np.zeros(3)
+    axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    return _unit(axis) * angle
+
+
 class ScriptedExpert:
-    """Solves LIBERO `In`/`On` goals by pick-and-place; call `act()` once per control step."""
+    """Solves LIBERO goals (`In`, `On`, `Open`, `Close`, `Turnon`); call `act()` once per control step."""
 
     def __init__(self, env, speed: float = 1.0, rng: np.random.Generator | None = None) -> None:
         self.view = SceneView(env)
         self.goal = [tuple(p) for p in env.env.parsed_problem["goal_state"]]
-        unsupported = [p for p in self.goal if p[0] not in SUPPORTED_PREDICATES]
+        unsupported = [p for p in self.goal if p[0] not in SKILL_ORDER]
         if unsupported:
             raise ExpertFailure(f"no scripted plan for goal predicates {unsupported}")
         self.speed = speed
@@ -54,38 +84,39 @@ class ScriptedExpert:
         self.done = False
 
     # Low-level control ---------------------------------------------------------------------------
-    def _action(self, pos: np.ndarray, yaw_dir: np.ndarray | None, grip: float, gain: float = 1.0,
-                max_speed: float = 1.0) -> np.ndarray:
-        """Proportional step towards `pos`, gripper pointing down, fingers along `yaw_dir` (xy)."""
+    def _finger_goal(self, axis: np.ndarray, finger: np.ndarray | None) -> np.ndarray:
+        """Goal finger direction: `finger` (xy or 3D) made normal to `axis`, of the sign nearest the current
+        one once the gripper is tilted onto `axis`; None keeps the current finger direction."""
+        f_now = _tilt(self.view.eef_axis_z(), axis) @ self.view.finger_axis()
+        f = f_now if finger is None else np.pad(finger, (0, 3 - len(finger)))
+        f = _unit(f - (f @ axis) * axis)
+        return f if f @ f_now >= 0 else -f  # a parallel gripper is symmetric under a half turn
+
+    def _rot_error(self, axis: np.ndarray, finger: np.ndarray | None) -> np.ndarray:
         v = self.view
-        dpos = np.clip((pos - v.eef_pos()) / POS_SCALE * 2.0 * gain, -max_speed, max_speed) * self.speed
-        # Tilt: rotate the gripper axis onto -z; yaw: turn the finger axis onto yaw_dir.
-        rot = np.cross(v.eef_axis_z(), [0.0, 0.0, -1.0])
-        if yaw_dir is not None:
-            f = v.finger_dir()
-            rot[2] += _wrap_half_pi(np.arctan2(yaw_dir[1], yaw_dir[0]) - np.arctan2(f[1], f[0]))
-        drot = np.clip(rot * 2.0 / ROT_SCALE, -1, 1)
+        return _rotation_error(v.eef_axis_z(), v.finger_axis(), axis, self._finger_goal(axis, finger))
+
+    def _action(self, pos: np.ndarray, finger: np.ndarray | None, grip: float, axis: np.ndarray = DOWN,
+                max_speed: float = 1.0) -> np.ndarray:
+        """Proportional step towards `pos`, gripper approach axis onto `axis`, fingers along `finger`."""
+        dpos = np.clip((pos - self.view.eef_pos()) / POS_SCALE * 2.0, -max_speed, max_speed) * self.speed
+        drot = np.clip(self._rot_error(axis, finger) * 2.0 / ROT_SCALE, -1, 1)
         return np.concatenate([dpos, drot, [grip]])
 
-    def _yaw_error(self, yaw_dir: np.ndarray | None) -> float:
-        if yaw_dir is None:
-            return 0.0
-        f = self.view.finger_dir()
-        return abs(_wrap_half_pi(np.arctan2(yaw_dir[1], yaw_dir[0]) - np.arctan2(f[1], f[0])))
-
-    def _move(self, goal, grip: float, tol: float = 0.01, max_steps: int = 60,
-              max_speed: float = 1.0) -> Skill:
-        """Move until within `tol` of goal() -> (pos, yaw_dir); goal is re-evaluated every step."""
+    def _move(self, goal, grip: float, tol: float = 0.01, max_steps: int = 60, max_speed: float = 1.0,
+              axis: np.ndarray = DOWN) -> Skill:
+        """Move until within `tol` of goal() -> (pos, finger); goal is re-evaluated every step."""
         for _ in range(max_steps):
-            pos, yaw_dir = goal()
-            if np.linalg.norm(pos - self.view.eef_pos()) < tol and self._yaw_error(yaw_dir) < 0.08:
+            pos, finger = goal()
+            if np.linalg.norm(pos - self.view.eef_pos()) < tol and (
+                    finger is None or np.linalg.norm(self._rot_error(axis, finger)) < 0.08):
                 return
-            yield self._action(pos, yaw_dir, grip, max_speed=max_speed)
+            yield self._action(pos, finger, grip, axis, max_speed=max_speed)
 
-    def _hold(self, grip: float, steps: int, yaw_dir: np.ndarray | None = None) -> Skill:
+    def _hold(self, grip: float, steps: int, finger: np.ndarray | None = None, axis: np.ndarray = DOWN) -> Skill:
         pos = self.view.eef_pos()
         for _ in range(steps):
-            yield self._action(pos, yaw_dir, grip)
+            yield self._action(pos, finger, grip, axis)
 
     # Skills ----------------------------------------------------------------------------------------
     def _grasp_pose(self, name: str, radial: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -104,25 +135,19 @@ class ScriptedExpert:
         return np.array([xy[0], xy[1], box.top - 0.02]), radial
 
     def _rim_direction(self, name: str) -> np.ndarray | None:
-        """For wide objects: the rim side with most room for the outer finger, preferring the robot side."""
-        v = self.view
-        box = v.box(name)
+        """For wide objects: the rim side with most room for the fingers and hand, preferring the robot side."""
+        box = self.view.box(name)
         if box.short <= MAX_FINGER_SPAN:
             return None
-        others = []
-        for other in [*v.inner.objects_dict, *v.inner.fixtures_dict]:
-            if other == name:
-                continue
-            ob = v.box(other)
-            supports = np.all(ob.low[:2] <= box.center[:2]) and np.all(box.center[:2] <= ob.high[:2])
-            if not supports and ob.top > box.bottom + 0.005:
-                others.append(ob)
+        lows, highs = self.view.obstacles(name, box.bottom + 0.005)
+        lows, highs = lows[:, :2], highs[:, :2]
         best, best_score = None, -np.inf
         for angle in np.linspace(-np.pi, np.pi, 24, endpoint=False):
             radial = np.array([np.cos(angle), np.sin(angle)])
-            finger = box.center[:2] + radial * (box.short / 2 + 0.015)
-            gaps = [np.linalg.norm(np.maximum(0, np.maximum(ob.low[:2] - finger, finger - ob.high[:2])))
-                    for ob in others]
+            # The outer finger just outside the rim, the inner finger and the hand above the bowl.
+            points = box.center[:2] + radial * (box.short / 2 + np.array([[0.015], [-0.06]]))
+            gaps = [np.linalg.norm(np.maximum(0, np.maximum(lows - p, p - highs)), axis=1).min(initial=1.0)
+                    for p in points]
             score = min([0.04, *gaps]) - 0.01 * radial[0]  # the robot stands at -x
             if score > best_score:
                 best, best_score = radial, score
@@ -158,7 +183,8 @@ class ScriptedExpert:
             z = v.site_pos(place)[2]
             return Target(xy, z + 0.02, z + 0.01)
         if place in v.inner.object_sites_dict:
-            owner = v.box(v.site_parent(place))
+            joints = v.joints(place)  # a drawer region moves with its drawer
+            owner = v.part_box(joints[0]) if joints else v.box(v.site_parent(place))
             site = v.site_pos(place)
             if relation == "in":  # container region: drop from just above the rim
                 return Target(site[:2], owner.top + 0.03, owner.top + 0.01)
@@ -184,12 +210,82 @@ class ScriptedExpert:
         up = v.eef_pos() + [0, 0, 0.08]
         yield from self._move(lambda: (up, None), OPEN, tol=0.02, max_steps=20)
 
+    # Articulated fixtures ------------------------------------------------------------------------------
+    def _joint(self, name: str) -> str:
+        joints = self.view.joints(name)
+        if len(joints) != 1:
+            raise ExpertFailure(f"{name} has joints {joints}; the expert drives exactly one")
+        return joints[0]
+
+    def _slide_drawer(self, name: str, predicate: str, outward: np.ndarray) -> Skill:
+        """Open (close) a drawer: grasp its handle from the front, gripper level, pull (push) until it is."""
+        v, joint = self.view, self._joint(name)
+        move = outward if predicate == "open" else -outward  # handle motion
+        axis, finger = -outward, np.array([0.0, 0.0, 1.0])  # point into the front, fingers above and below
+        start, start_finger = v.eef_pos(), v.finger_axis()
+        yield from self._move(lambda: (start, finger), OPEN, tol=0.05, max_steps=40, axis=axis)  # turn in place
+        front = v.handle_pos(joint, outward) + 0.12 * outward
+        above = [*front[:2], max(start[2], front[2] + 0.1)]  # come down in front of the handle, over the table
+        yield from self._move(lambda: (above, finger), OPEN, tol=0.03, max_steps=60, axis=axis)
+        yield from self._move(lambda: (front, finger), OPEN, tol=0.02, max_steps=60, axis=axis)
+        yield from self._move(lambda: (v.handle_pos(joint, outward) - 0.005 * outward, finger), OPEN, tol=0.008,
+                              max_steps=50, max_speed=0.5, axis=axis)
+        yield from self._hold(CLOSE, 12, finger, axis)
+        for _ in range(120):
+            if v.holds(predicate, name):
+                break
+            yield self._action(v.handle_pos(joint, outward) + 0.04 * move, finger, CLOSE, axis, max_speed=0.6)
+        yield from self._hold(OPEN, 8, finger, axis)
+        back = v.eef_pos() + 0.1 * outward
+        yield from self._move(lambda: (back, finger), OPEN, tol=0.02, max_steps=30, axis=axis)
+        # Turn back the way it came, so the wrist keeps its range for the next skill.
+        yield from self._move(lambda: (back + [0, 0, 0.05], start_finger), OPEN, tol=0.03, max_steps=40)
+
+    def _turn_knob(self, name: str, predicate: str, sign: float) -> Skill:
+        """Turn a knob (a hinge about the vertical): grasp its top ridge from above and twist until it is on."""
+        v, joint = self.view, self._joint(name)
+        ridge = v.top_part_box(joint)
+        grasp = np.array([*v.joint_anchor(joint)[:2], ridge.top - 0.012])
+        yield from self._move(lambda: (grasp + [0, 0, 0.08], ridge.short_dir), OPEN, tol=0.01, max_steps=80)
+        yield from self._move(lambda: (grasp, ridge.short_dir), OPEN, tol=0.006, max_steps=40, max_speed=0.5)
+        yield from self._hold(CLOSE, 10, ridge.short_dir)
+        f0, q0 = v.finger_axis(), v.joint_qpos(joint)
+        rot_axis = v.joint_axis(joint) * sign
+        for _ in range(60):
+            if v.holds(predicate, name):
+                break
+            angle = abs(v.joint_qpos(joint) - q0) + 0.4  # keep the twist a little ahead of the knob
+            yield self._action(grasp, _rotation(rot_axis, angle) @ f0, CLOSE)
+        yield from self._hold(OPEN, 8)
+        yield from self._move(lambda: (grasp + [0, 0, 0.1], None), OPEN, tol=0.02, max_steps=30)
+
+    def _articulate(self, name: str, predicate: str) -> Skill:
+        """Bring the fixture part behind `name` (a drawer region, a stove) to satisfy `predicate`."""
+        v, joint = self.view, self._joint(name)
+        art = v.articulation(name)
+        if v.joint_is_slide(joint) and predicate in ("open", "close"):
+            # A drawer's front faces the way it opens.
+            outward = v.joint_axis(joint) * np.sign(np.mean(art["default_open_ranges"])
+                                                     - np.mean(art["default_close_ranges"]))
+            yield from self._slide_drawer(name, predicate, outward)
+        elif not v.joint_is_slide(joint) and predicate == "turnon" and abs(v.joint_axis(joint)[2]) > 0.9:
+            sign = np.sign(np.mean(art["default_turnon_ranges"]) - v.joint_qpos(joint))
+            yield from self._turn_knob(name, predicate, sign)
+        else:
+            raise ExpertFailure(f"no skill for ({predicate} {name}) with joint {joint}")
+
     def _run(self) -> Skill:
-        for relation, obj, place in self.goal:
-            target = self._target(relation, place)
-            lift_z = target.clear_z + self.view.box(obj).height + 0.08
-            yield from self._pick(obj, lift_z)
-            yield from self._place(obj, relation, place)
+        for predicate, *args in sorted(self.goal, key=lambda p: SKILL_ORDER[p[0]]):
+            if predicate in ("in", "on"):
+                obj, place = args
+                if predicate == "in" and self.view.joints(place) and not self.view.holds("open", place):
+                    yield from self._articulate(place, "open")
+                target = self._target(predicate, place)
+                lift_z = target.clear_z + self.view.box(obj).height + 0.08
+                yield from self._pick(obj, lift_z)
+                yield from self._place(obj, predicate, place)
+            elif not self.view.holds(predicate, args[0]):
+                yield from self._articulate(args[0], predicate)
 
     # Public API ------------------------------------------------------------------------------------
     def act(self) -> np.ndarray:
