@@ -168,7 +168,8 @@ class ScriptedExpert:
                                   max_speed=0.6)
             yield from self._hold(CLOSE, 12)
             eef = self.view.eef_pos()
-            yield from self._move(lambda e=eef: (np.array([e[0], e[1], lift_z]), None), CLOSE,
+            up = max(lift_z, eef[2] + 0.08)  # also clear the object's own support (a cabinet top)
+            yield from self._move(lambda e=eef, z=up: (np.array([e[0], e[1], z]), None), CLOSE,
                                   tol=0.02, max_steps=40)
             if self.view.box(name).bottom > start_z + 0.03:
                 return
