@@ -91,3 +91,15 @@ def test_a_stale_config_names_the_file_and_key(tmp_path, monkeypatch):
     monkeypatch.setenv("LIBERO_CONFIG_PATH", str(tmp_path))
     with pytest.raises(RuntimeError, match=r"config.yaml: `bddl_files` is .*gone.*make libero"):
         task_spec(SUITE, TASK_ID)
+
+
+def test_expert_turns_on_the_stove(libero):
+    """An articulated goal (`Turnon`): the knob is grasped and twisted from a randomised reset, physics only."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.rollout import run_episode
+
+    env = env_mod.make_env(env_mod.task_spec("libero_goal", 7))  # turn_on_the_stove
+    episode = run_episode(env, seed=3, max_steps=300)
+    env.close()
+    assert episode.success, episode.note
+    assert len(episode.actions) < 150
