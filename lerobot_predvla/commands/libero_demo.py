@@ -31,12 +31,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("outputs/libero_demo"), help="output directory")
     p.add_argument("--suite", default="libero_object", help="LIBERO suite")
     p.add_argument("--tasks", type=task_ids, default=[0],
-                   help="task ids, e.g. 0,1 (default: task 0; two tasks need a longer schedule, see the README)")
+                   help="task ids, e.g. 0,1 (default: task 0, the measured default; see the README)")
     p.add_argument("--per-task", type=int, default=15, help="expert demonstrations per task")
     p.add_argument("--vision-weights", default="random",
                    help="ResNet18 weights for the front end: 'imagenet' (the paper's; needs the torchvision "
                    "download), a .pth file, or 'random' (default here: the download site is unreachable offline)")
-    p.add_argument("--steps", type=int, default=2000, help="lerobot-train steps")
+    p.add_argument("--steps", type=int, default=4000,
+                   help="lerobot-train steps (4,000: the open-loop prior learns the gripper release; 2,000 does not)")
     p.add_argument("--batch-size", type=int, default=8, help="lerobot-train batch size (episodes)")
     p.add_argument("--lr", type=float, default=1e-3, help="network learning rate (paper: 6e-5 over 30,000 steps)")
     p.add_argument("--episodes", type=int, default=10, help="evaluation episodes per task and mode")
