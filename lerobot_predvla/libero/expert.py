@@ -35,25 +35,25 @@ class Target:
     release_z: float
 
 
-def _wrap_half_pi(angle: float) -> float:
-    """Wrap to (-pi/2, pi/2]: a parallel gripper is symmetric under a half turn."""
-    return float((angle + np.pi / 2) % np.pi - np.pi / 2)
-
-
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / (np.linalg.norm(v) + 1e-9)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix of `v`: _skew(v) @ x == np.cross(v, x)."""
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
 
 
 def _tilt(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The smallest rotation matrix taking unit vector `a` onto unit vector `b` (Rodrigues)."""
     n, c = np.cross(a, b), float(a @ b)
-    k = np.array([[0, -n[2], n[1]], [n[2], 0, -n[0]], [-n[1], n[0], 0]])
+    k = _skew(n)
     return np.eye(3) + k + k @ k / (1 + c) if c > -0.999 else -np.eye(3)
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation matrix of `angle` about unit vector `axis`."""
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    k = _skew(axis)
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
@@ -218,9 +218,9 @@ class ScriptedExpert:
             raise ExpertFailure(f"{name} has joints {joints}; the expert drives exactly one")
         return joints[0]
 
-    def _slide_drawer(self, name: str, predicate: str, outward: np.ndarray) -> Skill:
+    def _slide_drawer(self, name: str, joint: str, predicate: str, outward: np.ndarray) -> Skill:
         """Open (close) a drawer: grasp its handle from the front, gripper level, pull (push) until it is."""
-        v, joint = self.view, self._joint(name)
+        v = self.view
         move = outward if predicate == "open" else -outward  # handle motion
         axis, finger = -outward, np.array([0.0, 0.0, 1.0])  # point into the front, fingers above and below
         start, start_finger = v.eef_pos(), v.finger_axis()
@@ -242,9 +242,9 @@ class ScriptedExpert:
         # Turn back the way it came, so the wrist keeps its range for the next skill.
         yield from self._move(lambda: (back + [0, 0, 0.05], start_finger), OPEN, tol=0.03, max_steps=40)
 
-    def _turn_knob(self, name: str, predicate: str, sign: float) -> Skill:
+    def _turn_knob(self, name: str, joint: str, predicate: str, sign: float) -> Skill:
         """Turn a knob (a hinge about the vertical): grasp its top ridge from above and twist until it is on."""
-        v, joint = self.view, self._joint(name)
+        v = self.view
         ridge = v.top_part_box(joint)
         grasp = np.array([*v.joint_anchor(joint)[:2], ridge.top - 0.012])
         yield from self._move(lambda: (grasp + [0, 0, 0.08], ridge.short_dir), OPEN, tol=0.01, max_steps=80)
@@ -268,10 +268,10 @@ class ScriptedExpert:
             # A drawer's front faces the way it opens.
             outward = v.joint_axis(joint) * np.sign(np.mean(art["default_open_ranges"])
                                                      - np.mean(art["default_close_ranges"]))
-            yield from self._slide_drawer(name, predicate, outward)
+            yield from self._slide_drawer(name, joint, predicate, outward)
         elif not v.joint_is_slide(joint) and predicate == "turnon" and abs(v.joint_axis(joint)[2]) > 0.9:
             sign = np.sign(np.mean(art["default_turnon_ranges"]) - v.joint_qpos(joint))
-            yield from self._turn_knob(name, predicate, sign)
+            yield from self._turn_knob(name, joint, predicate, sign)
         else:
             raise ExpertFailure(f"no skill for ({predicate} {name}) with joint {joint}")
 

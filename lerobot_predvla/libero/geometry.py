@@ -48,11 +48,6 @@ class SceneView:
     def eef_axis_z(self) -> np.ndarray:
         return self.sim.data.site_xmat[self.sim.model.site_name2id(GRIP_SITE)].reshape(3, 3)[:, 2].copy()
 
-    def finger_dir(self) -> np.ndarray:
-        """Unit xy direction along which the two fingers close."""
-        d = self.finger_axis()[:2]
-        return d / (np.linalg.norm(d) + 1e-9)
-
     def finger_axis(self) -> np.ndarray:
         """Unit 3D direction along which the two fingers close."""
         left, right = (self.sim.data.body_xpos[self.sim.model.body_name2id(b)] for b in FINGER_BODIES)
