@@ -18,6 +18,7 @@ OPEN, CLOSE = -1.0, 1.0
 MAX_FINGER_SPAN = 0.075  # wider objects are grasped at their rim
 PUSH_LEAN = 0.5  # tan of the gripper's lean back from vertical while pushing
 MIN_GRASP_HEIGHT = 0.03  # wide objects flatter than this (plates) are pushed along the table, not picked
+RIM_LEAN = 0.5  # tan of the lean along the rim a rim grasp may take to keep the hand off an overhang
 DOWN = np.array([0.0, 0.0, -1.0])
 SKILL_ORDER = {"open": 0, "turnon": 0, "in": 1, "on": 1, "close": 2}  # plan order of goal predicates
 
@@ -125,7 +126,7 @@ class ScriptedExpert:
         """Fingertip target and finger direction for a top-down grasp of object `name`.
 
         With a `radial` direction (objects wider than the fingers' span, e.g. bowls) the grasp is at
-        the rim point along it; the choice is made once per attempt by `_rim_direction`.
+        the rim point along it; the choice is made once per attempt by `_rim_grasp`.
         """
         box = self.view.box(name)
         if radial is None:
@@ -136,39 +137,56 @@ class ScriptedExpert:
         xy = box.center[:2] + radial * (box.short / 2 - 0.012)
         return np.array([xy[0], xy[1], box.top - 0.02]), radial
 
-    def _rim_direction(self, name: str) -> np.ndarray | None:
-        """For wide objects: the rim side with most room for the fingers and hand, preferring the robot side."""
+    def _rim_grasp(self, name: str) -> tuple[np.ndarray | None, np.ndarray]:
+        """For wide objects: the rim side (radial xy direction) and gripper axis with most room for the fingers
+        and the hand, preferring the robot side and an upright gripper; narrow objects: (None, DOWN).
+
+        The gripper may lean within the rim's tangent plane (the fingers still straddle the rim), which moves
+        the hand off an overhang such as an open drawer above the object.
+        """
         box = self.view.box(name)
         if box.short <= MAX_FINGER_SPAN:
-            return None
+            return None, DOWN
         lows, highs = self.view.obstacles(name, box.bottom + 0.005)
-        lows, highs = lows[:, :2], highs[:, :2]
-        best, best_score = None, -np.inf
+        best, best_score = (None, DOWN), -np.inf
         for angle in np.linspace(-np.pi, np.pi, 24, endpoint=False):
             radial = np.array([np.cos(angle), np.sin(angle)])
-            # The outer finger just outside the rim, the inner finger and the hand above the bowl.
-            points = box.center[:2] + radial * (box.short / 2 + np.array([[0.015], [-0.06]]))
-            gaps = [np.linalg.norm(np.maximum(0, np.maximum(lows - p, p - highs)), axis=1).min(initial=1.0)
-                    for p in points]
-            score = min([0.04, *gaps]) - 0.01 * radial[0]  # the robot stands at -x
-            if score > best_score:
-                best, best_score = radial, score
+            tangent = np.array([-radial[1], radial[0], 0.0])
+            grip, _ = self._grasp_pose(name, radial)
+            # The outer finger just outside the rim, the inner finger above the object.
+            fingers = [np.array([*(box.center[:2] + radial * (box.short / 2 + d)), grip[2]]) for d in (0.015, -0.06)]
+            for lean in (0.0, RIM_LEAN, -RIM_LEAN):
+                axis = _unit(DOWN + lean * tangent)
+                points = fingers + self._hand_points(grip, axis, np.array([*radial, 0.0]))
+                gaps = np.linalg.norm(np.maximum(0, np.maximum(lows[None] - np.array(points)[:, None],
+                                                               np.array(points)[:, None] - highs[None])), axis=2)
+                score = min(0.04, gaps.min(initial=1.0)) - 0.01 * radial[0] - 0.005 * abs(lean)  # robot at -x
+                if score > best_score:
+                    best, best_score = (radial, axis), score
         return best
+
+    @staticmethod
+    def _hand_points(grip: np.ndarray, axis: np.ndarray, finger: np.ndarray) -> list[np.ndarray]:
+        """Sample points of the hand (its 0.21 m span along the fingers, 0.05-0.13 m back from the grip point)
+        and of the wrist above it, for a grasp at `grip` with approach `axis` and finger direction `finger`."""
+        back = -axis
+        hand = [grip + back * h + finger * f for h in (0.05, 0.13) for f in np.linspace(-0.09, 0.09, 5)]
+        return hand + [grip + back * h for h in (0.2, 0.3)]
 
     def _pick(self, name: str, lift_z: float) -> Skill:
         for _attempt in range(3):
             start_z = self.view.box(name).bottom
             hover = max(self.view.box(name).top + 0.08, self.view.eef_pos()[2])
-            radial = self._rim_direction(name)
+            radial, axis = self._rim_grasp(name)
 
-            def above(h: float = hover, r: np.ndarray | None = radial):
+            def above(h: float = hover, r: np.ndarray | None = radial, a: np.ndarray = axis):
                 pos, yaw = self._grasp_pose(name, r)
-                return np.array([pos[0], pos[1], h]), yaw
+                return pos - a * (h - pos[2]) / -a[2], yaw  # back along the approach axis, up to height h
 
-            yield from self._move(above, OPEN, tol=0.01, max_steps=80)
+            yield from self._move(above, OPEN, tol=0.01, max_steps=80, axis=axis)
             yield from self._move(lambda r=radial: self._grasp_pose(name, r), OPEN, tol=0.006, max_steps=50,
-                                  max_speed=0.6)
-            yield from self._hold(CLOSE, 12)
+                                  max_speed=0.6, axis=axis)
+            yield from self._hold(CLOSE, 12, axis=axis)
             eef = self.view.eef_pos()
             up = max(lift_z, eef[2] + 0.08)  # also clear the object's own support (a cabinet top)
             yield from self._move(lambda e=eef, z=up: (np.array([e[0], e[1], z]), None), CLOSE,
