@@ -103,3 +103,43 @@ def test_expert_turns_on_the_stove(libero):
     env.close()
     assert episode.success, episode.note
     assert len(episode.actions) < 150
+
+
+def test_expert_pushes_the_plate_around_the_cream_cheese(libero):
+    """A flat object is pushed, not picked, along an L-shaped path that keeps the plate clear of the cream
+    cheese standing between it and the stove's front region, then into that region (physics only)."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.expert import ScriptedExpert
+    from lerobot_predvla.libero.rollout import run_episode
+
+    env = env_mod.make_env(env_mod.task_spec("libero_goal", 5))  # push_the_plate_to_the_front_of_the_stove
+    env_mod.random_reset(env, 1)
+    expert = ScriptedExpert(env)
+    start, corner, goal = expert._push_plan("plate_1", "main_table_stove_front_region")
+    assert np.allclose(corner, [start[0], goal[1]])  # first along y beside the cheese, then along x
+    assert expert._path_clearance("plate_1", expert.view.box("plate_1").long / 2, [start, goal]) < 0
+    episode = run_episode(env, seed=1, max_steps=300)
+    env.close()
+    assert episode.success, episode.note
+
+
+def test_expert_leans_its_rim_grasp_under_the_open_drawer(libero):
+    """Open the top drawer, then put the bowl inside: the open drawer overhangs the bowl, so the rim grasp
+    leans along the rim to keep the hand off it (upright, the hand hits the drawer: 1/10 before the lean)."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.expert import ScriptedExpert
+    from lerobot_predvla.libero.rollout import run_episode
+
+    env = env_mod.make_env(env_mod.task_spec("libero_goal", 3))  # open_the_top_drawer_and_put_the_bowl_inside
+    env_mod.random_reset(env, 2)
+    expert = ScriptedExpert(env)
+    _, upright = expert._rim_grasp("akita_black_bowl_1")
+    assert np.allclose(upright, [0, 0, -1])  # drawer closed: nothing above the bowl
+    joint = expert.view.joints("wooden_cabinet_1_top_region")[0]
+    env.sim.data.qpos[env.sim.model.get_joint_qpos_addr(joint)] = -0.15  # open (LIBERO: below -0.14)
+    env.sim.forward()
+    _, leaning = expert._rim_grasp("akita_black_bowl_1")
+    assert leaning[2] > -0.95  # tilted away from vertical by more than ~18 degrees
+    episode = run_episode(env, seed=2, max_steps=300)
+    env.close()
+    assert episode.success, episode.note
