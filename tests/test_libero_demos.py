@@ -110,10 +110,12 @@ def test_expert_pushes_the_plate_around_the_cream_cheese(libero):
     cheese standing between it and the stove's front region, then into that region (physics only)."""
     env_mod, _ = libero
     from lerobot_predvla.libero.expert import ScriptedExpert
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.libero.rollout import IDLE, SETTLE_STEPS, run_episode
 
     env = env_mod.make_env(env_mod.task_spec("libero_goal", 5))  # push_the_plate_to_the_front_of_the_stove
     env_mod.random_reset(env, 1)
+    for _ in range(SETTLE_STEPS):  # objects spawn above their support
+        env.step(IDLE)
     expert = ScriptedExpert(env)
     start, corner, goal = expert._push_plan("plate_1", "main_table_stove_front_region")
     assert np.allclose(corner, [start[0], goal[1]])  # first along y beside the cheese, then along x
