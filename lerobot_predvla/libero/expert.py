@@ -188,13 +188,23 @@ class ScriptedExpert:
                                   max_speed=0.6, axis=axis)
             yield from self._hold(CLOSE, 12, axis=axis)
             eef = self.view.eef_pos()
-            up = max(lift_z, eef[2] + 0.08)  # also clear the object's own support (a cabinet top)
+            # Also clear the object's own support (a cabinet top) and the walls around it (a drawer's).
+            up = max(lift_z, eef[2] + 0.08, eef[2] + self._walls_top(name) + 0.03 - self.view.box(name).bottom)
             yield from self._move(lambda e=eef, z=up: (np.array([e[0], e[1], z]), None), CLOSE,
                                   tol=0.02, max_steps=40)
             if self.view.box(name).bottom > start_z + 0.03:
                 return
             yield from self._hold(OPEN, 8)
         raise ExpertFailure(f"could not grasp {name}")
+
+    def _walls_top(self, name: str) -> float:
+        """Top of the highest collision geom beside object `name` (overlapping its footprint widened by 2 cm and
+        starting below its top), e.g. the walls of the drawer it stands in; its bottom if there is none."""
+        box = self.view.box(name)
+        lows, highs = self.view.obstacles(name, box.bottom)
+        beside = np.all((lows[:, :2] < box.high[:2] + 0.02) & (highs[:, :2] > box.low[:2] - 0.02), axis=1)
+        beside &= lows[:, 2] < box.top
+        return float(highs[beside, 2].max(initial=box.bottom))
 
     def _target(self, relation: str, place: str) -> Target:
         """Goal location of a carried object for `(relation obj place)`; place is an object or a site."""
@@ -224,8 +234,9 @@ class ScriptedExpert:
         def at(z: float):
             return lambda: (np.array([*(target.xy - offset_xy), z]), None)
 
-        yield from self._move(at(carry_z), CLOSE, tol=0.02, max_steps=30)  # up
-        yield from self._move(at(carry_z), CLOSE, tol=0.01, max_steps=100)
+        speed = 0.6 if box.short > MAX_FINGER_SPAN else 1.0  # held by the rim: a fast swing shakes it loose
+        yield from self._move(at(carry_z), CLOSE, tol=0.02, max_steps=30, max_speed=speed)  # up
+        yield from self._move(at(carry_z), CLOSE, tol=0.01, max_steps=100, max_speed=speed)
         yield from self._move(at(target.release_z + below), CLOSE, tol=0.01, max_steps=40, max_speed=0.5)
         yield from self._hold(OPEN, 10)
         up = v.eef_pos() + [0, 0, 0.08]
