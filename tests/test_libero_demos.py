@@ -145,3 +145,25 @@ def test_expert_leans_its_rim_grasp_under_the_open_drawer(libero):
     episode = run_episode(env, seed=2, max_steps=300)
     env.close()
     assert episode.success, episode.note
+
+
+def test_expert_swings_the_microwave_door_shut(libero):
+    """A hinged door's `Close` (libero_10 task 9's second predicate): the door is pushed round its hinge
+    from the trailing face until LIBERO's own predicate holds."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.expert import ScriptedExpert
+    from lerobot_predvla.libero.rollout import IDLE, SETTLE_STEPS
+
+    env = env_mod.make_env(env_mod.task_spec("libero_10", 9))  # ..._mug_in_the_microwave_and_close_it
+    env_mod.random_reset(env, 0)
+    for _ in range(SETTLE_STEPS):
+        env.step(IDLE)
+    expert = ScriptedExpert(env)
+    assert not expert.view.holds("close", "microwave_1")  # the scene starts with the door open
+    steps = 0
+    for action in expert._articulate("microwave_1", "close"):
+        env.step(action)
+        steps += 1
+    assert expert.view.holds("close", "microwave_1"), f"door at {expert.view.joint_qpos('microwave_1_microjoint')}"
+    env.close()
+    assert steps < 250

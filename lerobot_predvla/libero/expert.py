@@ -358,6 +358,34 @@ class ScriptedExpert:
         yield from self._hold(OPEN, 8)
         yield from self._move(lambda: (grasp + [0, 0, 0.1], None), OPEN, tol=0.02, max_steps=30)
 
+    def _swing_door(self, name: str, joint: str, predicate: str, sign: float) -> Skill:
+        """Swing a door about its vertical hinge: closed fingers press the face that trails the motion, near
+        the free edge at mid height, and follow the arc until LIBERO's predicate holds."""
+        v = self.view
+        axis = v.joint_axis(joint) * sign
+
+        def contact(ahead: float, hover: float = 0.0):
+            """A point of the door 3/4 of the way to its free edge, `ahead` along its motion there."""
+            anchor = v.joint_anchor(joint)
+            pts = v._corners(v.part_geoms(joint))
+            arm = pts - anchor
+            arm -= np.outer(arm @ axis, axis)
+            edge = pts[int(np.argmax(np.linalg.norm(arm, axis=1)))]
+            radial = edge - anchor - ((edge - anchor) @ axis) * axis
+            tangent = _unit(np.cross(axis, radial))
+            mid_z = (pts[:, 2].min() + pts[:, 2].max()) / 2
+            point = anchor + 0.75 * radial + tangent * ahead
+            return np.array([point[0], point[1], mid_z + hover]), _unit(radial[:2])
+
+        yield from self._move(lambda: contact(-0.04, 0.25), CLOSE, tol=0.02, max_steps=80)
+        yield from self._move(lambda: contact(-0.04), CLOSE, tol=0.015, max_steps=60, max_speed=0.6)
+        for _ in range(150):
+            if v.holds(predicate, name):
+                break
+            yield self._action(*contact(0.03), CLOSE, max_speed=0.5)
+        back = v.eef_pos() + [0, 0, 0.1]
+        yield from self._move(lambda: (back, None), CLOSE, tol=0.02, max_steps=20)
+
     def _articulate(self, name: str, predicate: str) -> Skill:
         """Bring the fixture part behind `name` (a drawer region, a stove) to satisfy `predicate`."""
         v, joint = self.view, self._joint(name)
@@ -370,6 +398,9 @@ class ScriptedExpert:
         elif not v.joint_is_slide(joint) and predicate == "turnon" and abs(v.joint_axis(joint)[2]) > 0.9:
             sign = np.sign(np.mean(art["default_turnon_ranges"]) - v.joint_qpos(joint))
             yield from self._turn_knob(name, joint, predicate, sign)
+        elif not v.joint_is_slide(joint) and predicate in ("open", "close") and abs(v.joint_axis(joint)[2]) > 0.9:
+            ranges = art[f"default_{predicate}_ranges"]
+            yield from self._swing_door(name, joint, predicate, np.sign(np.mean(ranges) - v.joint_qpos(joint)))
         else:
             raise ExpertFailure(f"no skill for ({predicate} {name}) with joint {joint}")
 
