@@ -60,6 +60,12 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
+def _box_gap(points: np.ndarray, lows: np.ndarray, highs: np.ndarray) -> float:
+    """Smallest distance from any of `points` (n, d) to any axis-aligned box (lows, highs: (m, d)); 1 if none."""
+    outside = np.maximum(0, np.maximum(lows[None] - points[:, None], points[:, None] - highs[None]))
+    return float(np.linalg.norm(outside, axis=2).min(initial=1.0))
+
+
 def _rotation_error(z_now: np.ndarray, f_now: np.ndarray, z_goal: np.ndarray, f_goal: np.ndarray) -> np.ndarray:
     """World-frame axis-angle turning the gripper frame (approach z, finger f) onto the goal frame."""
     now = np.column_stack([f_now, np.cross(z_now, f_now), z_now])
@@ -157,10 +163,8 @@ class ScriptedExpert:
             fingers = [np.array([*(box.center[:2] + radial * (box.short / 2 + d)), grip[2]]) for d in (0.015, -0.06)]
             for lean in (0.0, RIM_LEAN, -RIM_LEAN):
                 axis = _unit(DOWN + lean * tangent)
-                points = fingers + self._hand_points(grip, axis, np.array([*radial, 0.0]))
-                gaps = np.linalg.norm(np.maximum(0, np.maximum(lows[None] - np.array(points)[:, None],
-                                                               np.array(points)[:, None] - highs[None])), axis=2)
-                score = min(0.04, gaps.min(initial=1.0)) - 0.01 * radial[0] - 0.005 * abs(lean)  # robot at -x
+                points = np.array(fingers + self._hand_points(grip, axis, np.array([*radial, 0.0])))
+                score = min(0.04, _box_gap(points, lows, highs)) - 0.01 * radial[0] - 0.005 * abs(lean)  # robot at -x
                 if score > best_score:
                     best, best_score = (radial, axis), score
         return best
@@ -245,11 +249,8 @@ class ScriptedExpert:
     def _path_clearance(self, name: str, radius: float, path: list[np.ndarray]) -> float:
         """Smallest xy gap between the obstacles and a disc of `radius` swept along the polyline `path`."""
         lows, highs = self.view.obstacles(name, self.view.box(name).bottom + 0.005)
-        lows, highs = lows[:, :2], highs[:, :2]
         points = np.concatenate([np.linspace(a, b, 20) for a, b in zip(path[:-1], path[1:], strict=True)])
-        gaps = np.linalg.norm(np.maximum(0, np.maximum(lows[None] - points[:, None], points[:, None] - highs[None])),
-                              axis=2)
-        return float(gaps.min(initial=1.0)) - radius
+        return _box_gap(points, lows[:, :2], highs[:, :2]) - radius
 
     def _push_plan(self, name: str, place: str) -> list[np.ndarray]:
         """Path of the object's centre: from where it is to a point of the table region clear of obstacles,
@@ -366,12 +367,10 @@ class ScriptedExpert:
 
         def contact(ahead: float, hover: float = 0.0):
             """A point of the door 3/4 of the way to its free edge, `ahead` along its motion there."""
-            anchor = v.joint_anchor(joint)
-            pts = v._corners(v.part_geoms(joint))
-            arm = pts - anchor
-            arm -= np.outer(arm @ axis, axis)
-            edge = pts[int(np.argmax(np.linalg.norm(arm, axis=1)))]
-            radial = edge - anchor - ((edge - anchor) @ axis) * axis
+            anchor, pts = v.joint_anchor(joint), v.part_corners(joint)
+            arms = pts - anchor
+            arms -= np.outer(arms @ axis, axis)  # horizontal lever arms about the hinge
+            radial = arms[int(np.argmax(np.linalg.norm(arms, axis=1)))]  # to the free edge
             tangent = _unit(np.cross(axis, radial))
             mid_z = (pts[:, 2].min() + pts[:, 2].max()) / 2
             point = anchor + 0.75 * radial + tangent * ahead

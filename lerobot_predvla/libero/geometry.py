@@ -149,6 +149,10 @@ class SceneView:
         """Collision geoms moved by `joint` (the drawer, door or knob it carries)."""
         return self._subtree_geoms(int(self.model.jnt_bodyid[self.sim.model.joint_name2id(joint)]))
 
+    def part_corners(self, joint: str) -> np.ndarray:
+        """World corners of the collision geoms moved by `joint`, (8 * n, 3)."""
+        return self._corners(self.part_geoms(joint))
+
     def handle_pos(self, joint: str, outward: np.ndarray) -> np.ndarray:
         """Centre of the moving part's collision geom that sticks out furthest along `outward` (its handle)."""
         centers = self.sim.data._data.geom_xpos[self.part_geoms(joint)]
@@ -157,7 +161,7 @@ class SceneView:
     def part_box(self, joint: str) -> Box:
         """Box of the part moved by `joint` (a drawer), in the part's frame."""
         body = int(self.model.jnt_bodyid[self.sim.model.joint_name2id(joint)])
-        return self._box(self._corners(self.part_geoms(joint)), self.sim.data._data.xmat[body].reshape(3, 3))
+        return self._box(self.part_corners(joint), self.sim.data._data.xmat[body].reshape(3, 3))
 
     def holds(self, predicate: str, name: str) -> bool:
         """LIBERO's own test of a unary goal predicate (`open`, `close`, `turnon`) on a fixture or region."""
