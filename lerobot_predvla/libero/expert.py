@@ -18,6 +18,7 @@ OPEN, CLOSE = -1.0, 1.0
 MAX_FINGER_SPAN = 0.075  # wider objects are grasped at their rim
 PUSH_LEAN = 0.5  # tan of the gripper's lean back from vertical while pushing
 MIN_GRASP_HEIGHT = 0.03  # wide objects flatter than this (plates) are pushed along the table, not picked
+HANDLE_WIDTH = 0.03  # a wide object's handle: thinner than this across, grasped instead of a rim
 RIM_LEAN = 0.5  # tan of the lean along the rim a rim grasp may take to keep the hand off an overhang
 DOWN = np.array([0.0, 0.0, -1.0])
 SKILL_ORDER = {"open": 0, "turnon": 0, "in": 1, "on": 1, "close": 2}  # plan order of goal predicates
@@ -135,6 +136,10 @@ class ScriptedExpert:
         the rim point along it; the choice is made once per attempt by `_rim_grasp`.
         """
         box = self.view.box(name)
+        handle = self._handle(name) if box.short > MAX_FINGER_SPAN else None
+        if handle is not None:  # fingers across the handle's thin side
+            out = _unit(handle[:2] - self.view.body_pos(name)[:2])
+            return handle, np.array([-out[1], out[0]])
         if radial is None:
             # Narrow side between the fingers; round objects keep the current yaw.
             yaw = box.short_dir if box.long - box.short > 0.01 else None
@@ -142,6 +147,22 @@ class ScriptedExpert:
             return np.array([box.center[0], box.center[1], z]), yaw
         xy = box.center[:2] + radial * (box.short / 2 - 0.012)
         return np.array([xy[0], xy[1], box.top - 0.02]), radial
+
+    def _handle(self, name: str) -> np.ndarray | None:
+        """Top centre of the handle of a wide object (a moka pot): its collision geom reaching furthest from
+        the object's origin, if that is thinner than HANDLE_WIDTH across and reaches 2 cm beyond every geom
+        pointing elsewhere; None otherwise (bowls and boxes)."""
+        v = self.view
+        lows, highs = v.geom_boxes(name)
+        out = (lows + highs)[:, :2] / 2 - v.body_pos(name)[:2]
+        reach = np.linalg.norm(np.stack([lows[:, :2], highs[:, :2]], 1) - v.body_pos(name)[:2], axis=2).max(1)
+        i = int(np.lexsort((highs[:, 2], reach))[-1])  # furthest out, then highest
+        direction = _unit(out[i])
+        elsewhere = (out @ direction) < 0.5 * np.linalg.norm(out, axis=1)  # more than 60 degrees away
+        across = np.abs(np.array([-direction[1], direction[0]]) @ (highs[i, :2] - lows[i, :2]))
+        if across > HANDLE_WIDTH or reach[i] < reach[elsewhere].max(initial=0.0) + 0.02:
+            return None
+        return np.array([*out[i] + v.body_pos(name)[:2], highs[i, 2] - 0.015])
 
     def _rim_grasp(self, name: str) -> tuple[np.ndarray | None, np.ndarray]:
         """For wide objects: the rim side (radial xy direction) and gripper axis with most room for the fingers
@@ -151,7 +172,7 @@ class ScriptedExpert:
         the hand off an overhang such as an open drawer above the object.
         """
         box = self.view.box(name)
-        if box.short <= MAX_FINGER_SPAN:
+        if box.short <= MAX_FINGER_SPAN or self._handle(name) is not None:
             return None, DOWN
         lows, highs = self.view.obstacles(name, box.bottom + 0.005)
         best, best_score = (None, DOWN), -np.inf
@@ -210,8 +231,22 @@ class ScriptedExpert:
         beside &= lows[:, 2] < box.top
         return float(highs[beside, 2].max(initial=box.bottom))
 
-    def _target(self, relation: str, place: str) -> Target:
-        """Goal location of a carried object for `(relation obj place)`; place is an object or a site."""
+    def _free_spot(self, name: str, place: str) -> np.ndarray:
+        """xy in region site `place` (on a fixture) where object `name` keeps most clearance from what already
+        stands there (a first moka pot on the stove), nearest the centre among equals."""
+        v = self.view
+        owner = v.site_parent(place)
+        above = v.box(owner).top if owner else v.site_pos(place)[2]
+        lows, highs = v.obstacles(name, above + 0.005, *([owner] if owner else []))  # the fixture is not in the way
+        center = v.site_pos(place)[:2]
+        half = np.asarray(v.inner.object_sites_dict[place].size[:2]) - 0.01
+        radius = v.box(name).short / 2
+        grid = [center + half * np.array([i, j]) for i in np.linspace(-1, 1, 5) for j in np.linspace(-1, 1, 5)]
+        return max(grid, key=lambda q: min(0.02, _box_gap(q[None], lows[:, :2], highs[:, :2]) - radius)
+                   - 0.1 * np.linalg.norm(q - center))
+
+    def _target(self, relation: str, place: str, name: str) -> Target:
+        """Goal location of carried object `name` for `(relation name place)`; place is an object or a site."""
         v = self.view
         if place in v.inner.object_sites_dict and v.site_parent(place) is None:
             xy = v.site_pos(place)[:2]  # table region: put it there
@@ -223,7 +258,7 @@ class ScriptedExpert:
             site = v.site_pos(place)
             if relation == "in":  # container region: drop from just above the rim
                 return Target(site[:2], owner.top + 0.03, owner.top + 0.01)
-            return Target(site[:2], max(site[2], owner.top) + 0.02, site[2] + 0.01)
+            return Target(self._free_spot(name, place), max(site[2], owner.top) + 0.02, site[2] + 0.01)
         box = v.box(place)
         return Target(box.center[:2], box.top + 0.03, box.top + 0.01)
 
@@ -232,7 +267,7 @@ class ScriptedExpert:
         eef, box = v.eef_pos(), v.box(name)
         offset_xy = box.center[:2] - eef[:2]  # where the object hangs relative to the fingertips
         below = eef[2] - box.bottom
-        target = self._target(relation, place)
+        target = self._target(relation, place, name)
         carry_z = max(target.clear_z + below + 0.03, eef[2])
 
         def at(z: float):
@@ -414,7 +449,7 @@ class ScriptedExpert:
                     continue
                 if predicate == "in" and self.view.joints(place) and not self.view.holds("open", place):
                     yield from self._articulate(place, "open")
-                target = self._target(predicate, place)
+                target = self._target(predicate, place, obj)
                 lift_z = target.clear_z + self.view.box(obj).height + 0.08
                 yield from self._pick(obj, lift_z)
                 yield from self._place(obj, predicate, place)

@@ -106,11 +106,17 @@ class SceneView:
         short_dir = axes[i_short][:2] / (np.linalg.norm(axes[i_short][:2]) + 1e-9)
         return Box((low + high) / 2, low, high, short_dir, extents[i_short], extents[1 - i_short])
 
-    def obstacles(self, name: str, above_z: float) -> tuple[np.ndarray, np.ndarray]:
+    def geom_boxes(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """World AABBs (lows, highs), one per collision geom of object `name`."""
+        geoms = self._collision_geoms(name)
+        pts = self._corners(geoms).reshape(len(geoms), 8, 3)
+        return pts.min(1), pts.max(1)
+
+    def obstacles(self, name: str, above_z: float, *others: str) -> tuple[np.ndarray, np.ndarray]:
         """World AABBs (lows, highs) of the scene's collision geoms reaching above `above_z`, except the
-        robot's and those of object `name`."""
+        robot's and those of object `name` (and of objects `others`)."""
         m = self.model
-        own = set(self._collision_geoms(name).tolist())
+        own = {g for n in (name, *others) for g in self._collision_geoms(n).tolist()}
         robot = {b for b in range(m.nbody) if self.sim.model.body_id2name(b).startswith(("robot", "gripper"))}
         geoms = [g for g in range(m.ngeom) if (m.geom_contype[g] or m.geom_conaffinity[g])
                  and g not in own and m.geom_bodyid[g] not in robot]
