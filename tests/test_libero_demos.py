@@ -167,3 +167,28 @@ def test_expert_swings_the_microwave_door_shut(libero):
     assert expert.view.holds("close", "microwave_1"), f"door at {expert.view.joint_qpos('microwave_1_microjoint')}"
     env.close()
     assert steps < 250
+
+
+def test_expert_grasps_a_moka_pot_by_its_handle(libero):
+    """A wide object with a thin part reaching out (a moka pot's handle) is grasped there, fingers across it;
+    a bowl has no handle and keeps the rim grasp. Then the pot is picked and put on the stove."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.expert import ScriptedExpert
+    from lerobot_predvla.libero.rollout import run_episode
+
+    bowl_env = env_mod.make_env(env_mod.task_spec("libero_goal", 1))  # put_the_bowl_on_the_stove
+    env_mod.random_reset(bowl_env, 0)
+    assert ScriptedExpert(bowl_env)._handle("akita_black_bowl_1") is None
+    bowl_env.close()
+
+    env = env_mod.make_env(env_mod.task_spec("libero_10", 2))  # turn_on_the_stove_and_put_the_moka_pot_on_it
+    env_mod.random_reset(env, 0)
+    expert = ScriptedExpert(env)
+    handle = expert._handle("moka_pot_1")
+    origin = expert.view.body_pos("moka_pot_1")
+    assert handle is not None and np.linalg.norm(handle[:2] - origin[:2]) > 0.06
+    pos, finger = expert._grasp_pose("moka_pot_1")
+    assert np.allclose(pos, handle) and abs(finger @ (handle[:2] - origin[:2])) < 1e-6  # across the handle
+    episode = run_episode(env, seed=0, max_steps=520)
+    env.close()
+    assert episode.success, episode.note
