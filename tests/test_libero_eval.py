@@ -1,4 +1,4 @@
-"""Real `lerobot-eval` of a tiny PredVLA checkpoint on LIBERO (`--env.type=predvla_libero`).
+"""Real `lerobot-eval` of a tiny PredVLA checkpoint on LIBERO (`--env.type=predvla_libero` and LeRobot's `libero`).
 
 The checkpoint is trained for two steps on a converted dataset whose front end was fitted offline
 (`--vision-weights random`); the evaluation runs the simulator for one truncated episode.
@@ -75,8 +75,9 @@ def test_front_end_step_encodes_fresh_images_only(checkpoint):
     torch.testing.assert_close(out[0][OBS_LANGUAGE_FEATURES], frontend.encode_instructions([SOUP]), rtol=0, atol=0)
 
 
-def test_lerobot_eval_runs_predvla_on_libero(checkpoint, tmp_path):
-    log = run([str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", "--env.type=predvla_libero",
+@pytest.mark.parametrize("env_type", ["predvla_libero", "libero"])
+def test_lerobot_eval_runs_predvla_on_libero(checkpoint, tmp_path, env_type):
+    log = run([str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", f"--env.type={env_type}",
                f"--env.task={SUITE}", "--env.task_ids=[0]", f"--env.episode_length={EPISODE_STEPS}",
                "--eval.n_episodes=1", "--eval.batch_size=1", "--eval.use_async_envs=false", "--policy.device=cpu",
                f"--output_dir={tmp_path}"])
@@ -120,6 +121,31 @@ def test_predvla_libero_env_observations():
     venv.close()
     demo_env.close()
     assert fresh_flags == [1, 0, 0, 0, 1, 0]
+
+
+def test_lerobots_libero_env_gives_predvla_joint_proprio():
+    """With `--env.type=libero`, PredVLA policies get joints + gripper; other policies keep LeRobot's 8-dim state."""
+    from lerobot.envs import make_env, make_env_pre_post_processors
+    from lerobot.envs.configs import LiberoEnv
+    from lerobot.envs.utils import preprocess_observation
+    from lerobot.policies.act.configuration_act import ACTConfig
+
+    from lerobot_predvla import PredVLAConfig
+    from lerobot_predvla.configuration_predvla_bc_rnn import PredVLABCRNNConfig
+    from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+
+    cfg = LiberoEnv(task=SUITE, task_ids=[0], observation_height=128, observation_width=128)
+    venv = make_env(cfg, n_envs=1)[SUITE][0]
+    obs, _info = venv.reset(seed=[0])
+    venv.close()
+    joints = torch.from_numpy(obs["robot_state"]["joints"]["pos"]).float()
+    gripper = torch.from_numpy(obs["robot_state"]["gripper"]["qpos"]).float()
+    for policy_cfg in (PredVLAConfig(), PredVLABCRNNConfig()):
+        env_pre, _post = make_env_pre_post_processors(cfg, policy_cfg)
+        processed = env_pre(preprocess_observation(obs))
+        torch.testing.assert_close(processed["observation.state"], torch.cat([joints, gripper], -1))
+    env_pre, _post = make_env_pre_post_processors(cfg, ACTConfig())
+    assert env_pre(preprocess_observation(obs))["observation.state"].shape == (1, 8)  # LeRobot's eef state
 
 
 def test_published_files_reproduce_actions_front_end_included(checkpoint, tmp_path):

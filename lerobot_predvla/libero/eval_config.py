@@ -11,10 +11,19 @@ vectorisation, and changes three things:
   saved states), not at the first physics substep;
 - cameras are rendered only every `render_interval` steps at 128 px (the demonstrations' size); the
   steps in between repeat the last images and say so in `observation.image_fresh`.
+
+LeRobot's own `--env.type=libero` works too: LeRobot 0.6.1 chooses env processors by policy config in
+`make_env_pre_post_processors` (it special-cases X-VLA there) and offers plugins no hook, so importing this
+module wraps that function the same way for this plugin's policies. With the `libero` env type they get
+`PredVLALiberoProcessorStep` instead of LeRobot's `LiberoProcessorStep`; every other policy and env type gets
+LeRobot's processors unchanged. The other two changes above are not available there (every step is
+rendered, at 360 px unless `--env.observation_height/width=128`), so `predvla_libero` stays the default.
 """
 
+import sys
 from dataclasses import dataclass
 
+import lerobot.envs.factory
 import torch
 from lerobot.configs.types import FeatureType, PipelineFeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig, LiberoEnv, _make_vec_env_cls
@@ -36,7 +45,7 @@ class PredVLALiberoProcessorStep(ObservationProcessorStep):
             out[key] = torch.flip(out[key], dims=[2, 3])
         robot_state = observation.get(OBS_ROBOT_STATE)
         if robot_state is None:
-            raise KeyError(f"'{OBS_ROBOT_STATE}' missing: predvla_libero needs --env.obs_type=pixels_agent_pos.")
+            raise KeyError(f"'{OBS_ROBOT_STATE}' missing: PredVLA's proprio needs --env.obs_type=pixels_agent_pos.")
         state = torch.cat([robot_state["joints"]["pos"], robot_state["gripper"]["qpos"]], dim=-1).float()
         out[OBS_STATE] = state[None] if state.dim() == 1 else state
         return out
@@ -89,4 +98,30 @@ class PredVLALiberoEnv(LiberoEnv):
         return create_envs(self, n_envs, _make_vec_env_cls(use_async_envs, n_envs))
 
     def get_env_processors(self):
-        return PolicyProcessorPipeline(steps=[PredVLALiberoProcessorStep()]), PolicyProcessorPipeline(steps=[])
+        return libero_env_processors()
+
+
+def libero_env_processors() -> tuple[PolicyProcessorPipeline, PolicyProcessorPipeline]:
+    """Env pre/post-processors that turn LIBERO observations into what PredVLA consumes."""
+    return PolicyProcessorPipeline(steps=[PredVLALiberoProcessorStep()]), PolicyProcessorPipeline(steps=[])
+
+
+_lerobot_make_env_pre_post_processors = lerobot.envs.factory.make_env_pre_post_processors
+
+
+def make_env_pre_post_processors(env_cfg: EnvConfig, policy_cfg) -> tuple:
+    """LeRobot's `make_env_pre_post_processors`, with PredVLA's LIBERO step for this plugin's policies."""
+    from lerobot_predvla.configuration_predvla import PredVLAConfig
+    from lerobot_predvla.observation_policy import ObservationPolicyConfig
+
+    if type(env_cfg) is LiberoEnv and isinstance(policy_cfg, PredVLAConfig | ObservationPolicyConfig):
+        return libero_env_processors()
+    return _lerobot_make_env_pre_post_processors(env_cfg, policy_cfg)
+
+
+# The modules that bind LeRobot's function by name: the factory, its package, and the CLI scripts (loaded
+# before plugins when run as `lerobot-eval` / `lerobot-train`; imported later, they take it from the package).
+for _name in ("lerobot.envs.factory", "lerobot.envs", "lerobot.scripts.lerobot_eval", "lerobot.scripts.lerobot_train"):
+    _module = sys.modules.get(_name)
+    if getattr(_module, "make_env_pre_post_processors", None) is _lerobot_make_env_pre_post_processors:
+        _module.make_env_pre_post_processors = make_env_pre_post_processors
