@@ -192,3 +192,21 @@ def test_expert_grasps_a_moka_pot_by_its_handle(libero):
     episode = run_episode(env, seed=0, max_steps=520)
     env.close()
     assert episode.success, episode.note
+
+
+def test_expert_puts_each_mug_on_its_plate_by_body_origin(libero):
+    """LIBERO's `On` between two objects compares body origins (within 3 cm), and a mug held by its rim hangs
+    tilted, its box centre ~2 cm off its origin (at its bottom): the origin is carried over the plate's
+    (0/10 when box centres were aligned)."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.expert import ScriptedExpert
+    from lerobot_predvla.libero.rollout import run_episode
+
+    env = env_mod.make_env(env_mod.task_spec("libero_10", 4))  # white mug on the left plate, yellow one right
+    env_mod.random_reset(env, 0)
+    expert = ScriptedExpert(env)
+    target = expert._target("on", "plate_2", "white_yellow_mug_1")
+    assert target.by_origin and np.allclose(target.xy, expert.view.body_pos("plate_2")[:2])
+    episode = run_episode(env, seed=0, max_steps=520)
+    env.close()
+    assert episode.success, episode.note

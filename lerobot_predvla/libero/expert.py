@@ -32,11 +32,13 @@ class ExpertFailure(RuntimeError):
 
 @dataclass
 class Target:
-    """Where a carried object goes: xy of its centre, height to clear, height of its bottom at release."""
+    """Where a carried object goes: xy of its centre (of its body origin if `by_origin`), height to clear,
+    height of its bottom at release."""
 
     xy: np.ndarray
     clear_z: float
     release_z: float
+    by_origin: bool = False
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -259,15 +261,17 @@ class ScriptedExpert:
             if relation == "in":  # container region: drop from just above the rim
                 return Target(site[:2], owner.top + 0.03, owner.top + 0.01)
             return Target(self._free_spot(name, place), max(site[2], owner.top) + 0.02, site[2] + 0.01)
-        box = v.box(place)
-        return Target(box.center[:2], box.top + 0.03, box.top + 0.01)
+        # LIBERO's `On`/`In` between objects compare body origins; a mug hanging tilted from its rim has its box
+        # centre ~2 cm off its origin (at its bottom).
+        return Target(v.body_pos(place)[:2], v.box(place).top + 0.03, v.box(place).top + 0.01, by_origin=True)
 
     def _place(self, name: str, relation: str, place: str) -> Skill:
         v = self.view
         eef, box = v.eef_pos(), v.box(name)
-        offset_xy = box.center[:2] - eef[:2]  # where the object hangs relative to the fingertips
-        below = eef[2] - box.bottom
         target = self._target(relation, place, name)
+        held = v.body_pos(name) if target.by_origin else box.center
+        offset_xy = held[:2] - eef[:2]  # where the object hangs relative to the fingertips
+        below = eef[2] - box.bottom
         carry_z = max(target.clear_z + below + 0.03, eef[2])
 
         def at(z: float):
