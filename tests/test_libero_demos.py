@@ -210,3 +210,27 @@ def test_expert_puts_each_mug_on_its_plate_by_body_origin(libero):
     episode = run_episode(env, seed=0, max_steps=520)
     env.close()
     assert episode.success, episode.note
+
+
+def test_expert_puts_the_bowl_in_the_bottom_drawer_and_pushes_it_shut(libero):
+    """libero_10 task 3: between the open bottom drawer's front and the cabinet over its back there is less room
+    than the bowl needs until the drawer is pushed out to its stop (from inside); the bowl is lowered there, then
+    the drawer is pushed shut by its handle (0/10 before, grasping the sideways handle to close it; 9/10 with the
+    push alone, the bowl dropped from higher up landing tilted once and jamming the drawer)."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.expert import ScriptedExpert
+    from lerobot_predvla.libero.rollout import IDLE, SETTLE_STEPS, run_episode
+
+    env = env_mod.make_env(env_mod.task_spec("libero_10", 3))  # ..._black_bowl_in_the_bottom_drawer_..._and_close_it
+    env_mod.random_reset(env, 0)
+    for _ in range(SETTLE_STEPS):
+        env.step(IDLE)
+    expert = ScriptedExpert(env)
+    region, joint = "white_cabinet_1_bottom_region", "white_cabinet_1_bottom_level"
+    assert expert._drawer_spot("akita_black_bowl_1", region)[1] < 0
+    env.sim.data.qpos[env.sim.model.get_joint_qpos_addr(joint)] = expert.view.joint_range(joint)[0]  # open stop
+    env.sim.forward()
+    assert expert._drawer_spot("akita_black_bowl_1", region)[1] > 0
+    episode = run_episode(env, seed=0, max_steps=520)
+    env.close()
+    assert episode.success, episode.note

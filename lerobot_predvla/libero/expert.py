@@ -63,10 +63,15 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
+def _box_gaps(points: np.ndarray, lows: np.ndarray, highs: np.ndarray) -> np.ndarray:
+    """Distance from each of `points` (n, d) to the nearest axis-aligned box (lows, highs: (m, d)); 1 if none."""
+    outside = np.maximum(0, np.maximum(lows[None] - points[:, None], points[:, None] - highs[None]))
+    return np.linalg.norm(outside, axis=2).min(1, initial=1.0)
+
+
 def _box_gap(points: np.ndarray, lows: np.ndarray, highs: np.ndarray) -> float:
     """Smallest distance from any of `points` (n, d) to any axis-aligned box (lows, highs: (m, d)); 1 if none."""
-    outside = np.maximum(0, np.maximum(lows[None] - points[:, None], points[:, None] - highs[None]))
-    return float(np.linalg.norm(outside, axis=2).min(initial=1.0))
+    return float(_box_gaps(points, lows, highs).min(initial=1.0))
 
 
 def _rotation_error(z_now: np.ndarray, f_now: np.ndarray, z_goal: np.ndarray, f_goal: np.ndarray) -> np.ndarray:
@@ -233,19 +238,25 @@ class ScriptedExpert:
         beside &= lows[:, 2] < box.top
         return float(highs[beside, 2].max(initial=box.bottom))
 
-    def _free_spot(self, name: str, place: str) -> np.ndarray:
-        """xy in region site `place` (on a fixture) where object `name` keeps most clearance from what already
-        stands there (a first moka pot on the stove), nearest the centre among equals."""
+    def _free_spot(self, name: str, place: str, floor_z: float) -> tuple[np.ndarray, float]:
+        """xy in region site `place` (on a fixture) where object `name` keeps most clearance from what reaches
+        above `floor_z`, the top of what it will stand on (a first moka pot on the stove, the cabinet over the
+        back of an open drawer), nearest the centre among equals; and that clearance (capped at 2 cm)."""
         v = self.view
-        owner = v.site_parent(place)
-        above = v.box(owner).top if owner else v.site_pos(place)[2]
-        lows, highs = v.obstacles(name, above + 0.005, *([owner] if owner else []))  # the fixture is not in the way
+        lows, highs = v.obstacles(name, floor_z + 0.005)
         center = v.site_pos(place)[:2]
-        half = np.asarray(v.inner.object_sites_dict[place].size[:2]) - 0.01
+        half = v.site_half_size(place)[:2] - 0.01
         radius = v.box(name).short / 2
-        grid = [center + half * np.array([i, j]) for i in np.linspace(-1, 1, 5) for j in np.linspace(-1, 1, 5)]
-        return max(grid, key=lambda q: min(0.02, _box_gap(q[None], lows[:, :2], highs[:, :2]) - radius)
-                   - 0.1 * np.linalg.norm(q - center))
+        grid = center + half * np.stack(np.meshgrid(*[np.linspace(-1, 1, 41)] * 2), -1).reshape(-1, 2)
+        clearance = np.minimum(0.02, _box_gaps(grid, lows[:, :2], highs[:, :2]) - radius)
+        best = int(np.argmax(clearance - 0.1 * np.linalg.norm(grid - center, axis=1)))
+        return grid[best], float(clearance[best])
+
+    def _drawer_spot(self, name: str, place: str) -> tuple[np.ndarray, float]:
+        """`_free_spot` of object `name` in drawer region `place`: between the drawer's walls, clear of the cabinet
+        over its back."""
+        floor = self.view.site_pos(place)[2] - self.view.site_half_size(place)[2] + 0.01
+        return self._free_spot(name, place, floor)
 
     def _target(self, relation: str, place: str, name: str) -> Target:
         """Goal location of carried object `name` for `(relation name place)`; place is an object or a site."""
@@ -258,9 +269,11 @@ class ScriptedExpert:
             joints = v.joints(place)  # a drawer region moves with its drawer
             owner = v.part_box(joints[0]) if joints else v.box(v.site_parent(place))
             site = v.site_pos(place)
+            if relation == "in" and joints:
+                return Target(self._drawer_spot(name, place)[0], owner.top + 0.03, owner.top + 0.01)
             if relation == "in":  # container region: drop from just above the rim
                 return Target(site[:2], owner.top + 0.03, owner.top + 0.01)
-            return Target(self._free_spot(name, place), max(site[2], owner.top) + 0.02, site[2] + 0.01)
+            return Target(self._free_spot(name, place, owner.top)[0], max(site[2], owner.top) + 0.02, site[2] + 0.01)
         # LIBERO's `On`/`In` between objects compare body origins; a mug hanging tilted from its rim has its box
         # centre ~2 cm off its origin (at its bottom).
         return Target(v.body_pos(place)[:2], v.box(place).top + 0.03, v.box(place).top + 0.01, by_origin=True)
@@ -297,7 +310,7 @@ class ScriptedExpert:
         v = self.view
         box = v.box(name)
         radius = box.long / 2
-        half = np.asarray(v.inner.object_sites_dict[place].size[:2]) - 0.015  # margin inside the region
+        half = v.site_half_size(place)[:2] - 0.015  # margin inside the region
         center = v.site_pos(place)[:2]
         grid = [center + half * np.array([i, j]) for i in np.linspace(-1, 1, 5) for j in np.linspace(-1, 1, 5)]
         goal = max(grid, key=lambda p: min(0.02, self._path_clearance(name, radius, [p, p]))
@@ -356,10 +369,9 @@ class ScriptedExpert:
             raise ExpertFailure(f"{name} has joints {joints}; the expert drives exactly one")
         return joints[0]
 
-    def _slide_drawer(self, name: str, joint: str, predicate: str, outward: np.ndarray) -> Skill:
-        """Open (close) a drawer: grasp its handle from the front, gripper level, pull (push) until it is."""
+    def _pull_drawer_open(self, name: str, joint: str, outward: np.ndarray) -> Skill:
+        """Open a drawer: grasp its handle from the front, gripper level, pull until it is open."""
         v = self.view
-        move = outward if predicate == "open" else -outward  # handle motion
         axis, finger = -outward, np.array([0.0, 0.0, 1.0])  # point into the front, fingers above and below
         start, start_finger = v.eef_pos(), v.finger_axis()
         yield from self._move(lambda: (start, finger), OPEN, tol=0.05, max_steps=40, axis=axis)  # turn in place
@@ -371,14 +383,56 @@ class ScriptedExpert:
                               max_steps=50, max_speed=0.5, axis=axis)
         yield from self._hold(CLOSE, 12, finger, axis)
         for _ in range(120):
-            if v.holds(predicate, name):
+            if v.holds("open", name):
                 break
-            yield self._action(v.handle_pos(joint, outward) + 0.04 * move, finger, CLOSE, axis, max_speed=0.6)
+            yield self._action(v.handle_pos(joint, outward) + 0.04 * outward, finger, CLOSE, axis, max_speed=0.6)
         yield from self._hold(OPEN, 8, finger, axis)
         back = v.eef_pos() + 0.1 * outward
         yield from self._move(lambda: (back, finger), OPEN, tol=0.02, max_steps=30, axis=axis)
         # Turn back the way it came, so the wrist keeps its range for the next skill.
         yield from self._move(lambda: (back + [0, 0, 0.05], start_finger), OPEN, tol=0.03, max_steps=40)
+
+    def _push_drawer_shut(self, name: str, joint: str, outward: np.ndarray) -> Skill:
+        """Close a drawer by pushing its handle in: closed fingers across the motion, the gripper leaning forward
+        so the hand trails the fingertips, clear of the cabinet front above the drawer."""
+        v = self.view
+        axis = _unit(DOWN - PUSH_LEAN * outward)
+        finger = np.array([-outward[1], outward[0]])
+
+        def at(out: float, hover: float = 0.0):
+            return v.handle_pos(joint, outward) + out * outward + [0, 0, hover], finger
+
+        yield from self._move(lambda: at(0.04, 0.1), CLOSE, tol=0.02, max_steps=80, axis=axis)
+        yield from self._move(lambda: at(0.025), CLOSE, tol=0.01, max_steps=60, max_speed=0.5, axis=axis)
+        for _ in range(120):
+            if v.holds("close", name):
+                break
+            yield self._action(*at(-0.04), CLOSE, axis, max_speed=0.5)
+        back = v.eef_pos() + 0.08 * outward + [0, 0, 0.05]
+        yield from self._move(lambda: (back, None), CLOSE, tol=0.02, max_steps=30)
+
+    def _push_drawer_to_stop(self, name: str) -> Skill:
+        """Push an open drawer out to its stop from inside: closed fingers across the motion press the inner face
+        of its front, so that a wide object (a bowl) fits between the front and the cabinet over the back."""
+        v, joint = self.view, self._joint(name)
+        sign = self._open_sign(name)
+        outward, stop = v.joint_axis(joint) * sign, v.joint_range(joint)[int(sign > 0)]
+        finger = np.array([-outward[1], outward[0]])
+
+        def at(out: float, hover: float = 0.0):
+            """A point `out` from the front's inner face (the region site's side), 2 cm above the floor."""
+            site, half = v.site_pos(name), v.site_half_size(name)
+            point = site + outward * (half @ np.abs(outward) - 0.015 + out)
+            return np.array([point[0], point[1], site[2] - half[2] + 0.02 + hover]), finger
+
+        yield from self._move(lambda: at(0.0, 0.1), CLOSE, tol=0.02, max_steps=80)
+        yield from self._move(lambda: at(0.0), CLOSE, tol=0.01, max_steps=60, max_speed=0.5)
+        for _ in range(60):
+            if abs(v.joint_qpos(joint) - stop) < 0.003:
+                break
+            yield self._action(*at(0.04), CLOSE, max_speed=0.5)
+        up = v.eef_pos() + [0, 0, 0.1]
+        yield from self._move(lambda: (up, None), CLOSE, tol=0.02, max_steps=30)
 
     def _turn_knob(self, name: str, joint: str, predicate: str, sign: float) -> Skill:
         """Turn a knob (a hinge about the vertical): grasp its top ridge from above and twist until it is on."""
@@ -424,15 +478,21 @@ class ScriptedExpert:
         back = v.eef_pos() + [0, 0, 0.1]
         yield from self._move(lambda: (back, None), CLOSE, tol=0.02, max_steps=20)
 
+    def _open_sign(self, name: str) -> float:
+        """+1 if the drawer behind region `name` opens towards larger qpos, else -1."""
+        art = self.view.articulation(name)
+        return float(np.sign(np.mean(art["default_open_ranges"]) - np.mean(art["default_close_ranges"])))
+
     def _articulate(self, name: str, predicate: str) -> Skill:
         """Bring the fixture part behind `name` (a drawer region, a stove) to satisfy `predicate`."""
         v, joint = self.view, self._joint(name)
         art = v.articulation(name)
         if v.joint_is_slide(joint) and predicate in ("open", "close"):
-            # A drawer's front faces the way it opens.
-            outward = v.joint_axis(joint) * np.sign(np.mean(art["default_open_ranges"])
-                                                     - np.mean(art["default_close_ranges"]))
-            yield from self._slide_drawer(name, joint, predicate, outward)
+            outward = v.joint_axis(joint) * self._open_sign(name)  # a drawer's front faces the way it opens
+            if predicate == "open":
+                yield from self._pull_drawer_open(name, joint, outward)
+            else:
+                yield from self._push_drawer_shut(name, joint, outward)
         elif not v.joint_is_slide(joint) and predicate == "turnon" and abs(v.joint_axis(joint)[2]) > 0.9:
             sign = np.sign(np.mean(art["default_turnon_ranges"]) - v.joint_qpos(joint))
             yield from self._turn_knob(name, joint, predicate, sign)
@@ -451,8 +511,11 @@ class ScriptedExpert:
                 if predicate == "on" and table_region and box.short > MAX_FINGER_SPAN and box.height < MIN_GRASP_HEIGHT:
                     yield from self._push(obj, place)
                     continue
-                if predicate == "in" and self.view.joints(place) and not self.view.holds("open", place):
-                    yield from self._articulate(place, "open")
+                if predicate == "in" and self.view.joints(place):
+                    if not self.view.holds("open", place):
+                        yield from self._articulate(place, "open")
+                    if self._drawer_spot(obj, place)[1] < 0.005:  # too tight to lower it in
+                        yield from self._push_drawer_to_stop(place)
                 target = self._target(predicate, place, obj)
                 lift_z = target.clear_z + self.view.box(obj).height + 0.08
                 yield from self._pick(obj, lift_z)

@@ -144,6 +144,10 @@ class SceneView:
     def joint_is_slide(self, joint: str) -> bool:
         return bool(self.model.jnt_type[self.sim.model.joint_name2id(joint)] == 2)  # mjJNT_SLIDE
 
+    def joint_range(self, joint: str) -> np.ndarray:
+        """The joint's limits (lower, upper) in qpos units."""
+        return self.model.jnt_range[self.sim.model.joint_name2id(joint)].copy()
+
     def joint_axis(self, joint: str) -> np.ndarray:
         """World direction of the joint axis (motion per unit qpos for slides, rotation axis for hinges)."""
         return self.sim.data._data.xaxis[self.sim.model.joint_name2id(joint)].copy()
@@ -185,6 +189,11 @@ class SceneView:
     # Regions ---------------------------------------------------------------------------------------
     def site_pos(self, name: str) -> np.ndarray:
         return self.sim.data.site_xpos[self.sim.model.site_name2id(name)].copy()
+
+    def site_half_size(self, name: str) -> np.ndarray:
+        """World half extents (3,) of region site `name`, as LIBERO's containment test takes them."""
+        size = np.asarray(self.inner.object_sites_dict[name].size)
+        return np.abs(self.sim.data.site_xmat[self.sim.model.site_name2id(name)].reshape(3, 3) @ size)
 
     def site_parent(self, name: str) -> str | None:
         site = self.inner.object_sites_dict.get(name)
