@@ -238,12 +238,13 @@ class ScriptedExpert:
         beside &= lows[:, 2] < box.top
         return float(highs[beside, 2].max(initial=box.bottom))
 
-    def _free_spot(self, name: str, place: str, floor_z: float) -> tuple[np.ndarray, float]:
+    def _free_spot(self, name: str, place: str, floor_z: float, roof_z: float = np.inf) -> tuple[np.ndarray, float]:
         """xy in region site `place` (on a fixture) where object `name` keeps most clearance from what reaches
         above `floor_z`, the top of what it will stand on (a first moka pot on the stove, the cabinet over the
-        back of an open drawer), nearest the centre among equals; and that clearance (capped at 2 cm)."""
+        back of an open drawer), and starts below `roof_z`, nearest the centre among equals; and that clearance
+        (capped at 2 cm)."""
         v = self.view
-        lows, highs = v.obstacles(name, floor_z + 0.005)
+        lows, highs = v.obstacles(name, floor_z + 0.005, below_z=roof_z)
         center = v.site_pos(place)[:2]
         half = v.site_half_size(place)[:2] - 0.01
         radius = v.box(name).short / 2
@@ -297,6 +298,53 @@ class ScriptedExpert:
         yield from self._hold(OPEN, 10)
         up = v.eef_pos() + [0, 0, 0.08]
         yield from self._move(lambda: (up, None), OPEN, tol=0.02, max_steps=20)
+
+    def _opening(self, place: str) -> np.ndarray | None:
+        """Unit xy direction out of a roofed region site (a microwave's cavity) through its open side: of +-x and
+        +-y, the one in which no geom of the region's owner stands beside the region; None without a roof."""
+        v = self.view
+        lows, highs = v.geom_boxes(v.site_parent(place))
+        site, half = v.site_pos(place), v.site_half_size(place)
+        over = np.all((lows[:, :2] < site[:2]) & (highs[:, :2] > site[:2]), axis=1)
+        roof = over & (lows[:, 2] > site[2]) & (lows[:, 2] < site[2] + half[2])
+        if v.joints(place) or not roof.any():
+            return None
+        for d in np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]]):
+            ray = np.array([[*(site[:2] + d * t), site[2]] for t in np.linspace(0, 0.3, 30)])
+            if _box_gap(ray, lows, highs) > 0:
+                return d
+        return None
+
+    def _slide_in(self, name: str, place: str, out: np.ndarray) -> Skill:
+        """Put object `name` into a roofed region (a microwave) through its open side `out`: grasp the part of
+        the object reaching furthest that way (a mug's handle) from above, fingers across it and the gripper
+        leaning back so the hand stays outside, under the roof's edge; carry the object in front of the opening
+        just above the floor, slide it in until its origin is 2.5 cm inside the region, release, back out."""
+        v = self.view
+        axis, finger = _unit(np.append(-RIM_LEAN * out, -1.0)), np.array([-out[1], out[0]])
+        lows, highs = v.geom_boxes(name)
+        part = int(np.argmax((lows + highs)[:, :2] @ out))
+        # Fingertips 1.4 cm below the part's top, relative to the object's origin (held rigidly from now on).
+        grip = np.array([*(lows[part, :2] + highs[part, :2]) / 2, highs[part, 2] - 0.014]) - v.body_pos(name)
+        yield from self._move(lambda: (v.body_pos(name) + grip - axis * 0.1, finger), OPEN, tol=0.01, max_steps=100,
+                              axis=axis)
+        yield from self._move(lambda: (v.body_pos(name) + grip, finger), OPEN, tol=0.006, max_steps=60,
+                              max_speed=0.5, axis=axis)
+        yield from self._hold(CLOSE, 12, finger, axis)
+        site, half = v.site_pos(place), v.site_half_size(place)
+        floor = site[2] - half[2] + 0.01
+        spot = self._free_spot(name, place, floor, roof_z=floor + v.box(name).height)[0]
+        depth = site[:2] @ out + half[:2] @ np.abs(out) - 0.025  # the origin's coordinate along `out`
+        goal = spot + out * (depth - spot @ out)
+        front = goal + 0.13 * out  # clear of the opening
+        # The origin (at the object's bottom): above the front, down to just above the floor, then in.
+        for xy, z, speed in ((front, floor + 0.1, 0.6), (front, floor + 0.01, 0.5), (goal, floor + 0.01, 0.4)):
+            origin = np.array([*xy, z])
+            yield from self._move(lambda o=origin: (o + grip, finger), CLOSE, tol=0.01, max_steps=100,
+                                  max_speed=speed, axis=axis)
+        yield from self._hold(OPEN, 10, finger, axis)
+        back = v.eef_pos() + 0.1 * np.append(out, 0.0)
+        yield from self._move(lambda: (back, finger), OPEN, tol=0.02, max_steps=30, axis=axis)
 
     def _path_clearance(self, name: str, radius: float, path: list[np.ndarray]) -> float:
         """Smallest xy gap between the obstacles and a disc of `radius` swept along the polyline `path`."""
@@ -510,6 +558,10 @@ class ScriptedExpert:
                 table_region = place in self.view.inner.object_sites_dict and self.view.site_parent(place) is None
                 if predicate == "on" and table_region and box.short > MAX_FINGER_SPAN and box.height < MIN_GRASP_HEIGHT:
                     yield from self._push(obj, place)
+                    continue
+                out = self._opening(place) if predicate == "in" and place in self.view.inner.object_sites_dict else None
+                if out is not None:
+                    yield from self._slide_in(obj, place, out)
                     continue
                 if predicate == "in" and self.view.joints(place):
                     if not self.view.holds("open", place):

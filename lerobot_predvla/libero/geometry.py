@@ -112,9 +112,10 @@ class SceneView:
         pts = self._corners(geoms).reshape(len(geoms), 8, 3)
         return pts.min(1), pts.max(1)
 
-    def obstacles(self, name: str, above_z: float, *others: str) -> tuple[np.ndarray, np.ndarray]:
-        """World AABBs (lows, highs) of the scene's collision geoms reaching above `above_z`, except the
-        robot's and those of object `name` (and of objects `others`)."""
+    def obstacles(self, name: str, above_z: float, *others: str,
+                  below_z: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """World AABBs (lows, highs) of the scene's collision geoms reaching above `above_z` (and starting below
+        `below_z`), except the robot's and those of object `name` (and of objects `others`)."""
         m = self.model
         own = {g for n in (name, *others) for g in self._collision_geoms(n).tolist()}
         robot = {b for b in range(m.nbody) if self.sim.model.body_id2name(b).startswith(("robot", "gripper"))}
@@ -122,7 +123,7 @@ class SceneView:
                  and g not in own and m.geom_bodyid[g] not in robot]
         pts = self._corners(np.array(geoms)).reshape(len(geoms), 8, 3)
         lows, highs = pts.min(1), pts.max(1)
-        keep = highs[:, 2] > above_z
+        keep = (highs[:, 2] > above_z) & (lows[:, 2] < below_z)
         return lows[keep], highs[keep]
 
     # Articulations --------------------------------------------------------------------------------
