@@ -112,12 +112,11 @@ class SceneView:
         pts = self._corners(geoms).reshape(len(geoms), 8, 3)
         return pts.min(1), pts.max(1)
 
-    def obstacles(self, name: str, above_z: float, *others: str,
-                  below_z: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+    def obstacles(self, name: str, above_z: float, below_z: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
         """World AABBs (lows, highs) of the scene's collision geoms reaching above `above_z` (and starting below
-        `below_z`), except the robot's and those of object `name` (and of objects `others`)."""
+        `below_z`), except the robot's and those of object `name`."""
         m = self.model
-        own = {g for n in (name, *others) for g in self._collision_geoms(n).tolist()}
+        own = set(self._collision_geoms(name).tolist())
         robot = {b for b in range(m.nbody) if self.sim.model.body_id2name(b).startswith(("robot", "gripper"))}
         geoms = [g for g in range(m.ngeom) if (m.geom_contype[g] or m.geom_conaffinity[g])
                  and g not in own and m.geom_bodyid[g] not in robot]
