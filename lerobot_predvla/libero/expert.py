@@ -256,8 +256,7 @@ class ScriptedExpert:
     def _drawer_spot(self, name: str, place: str) -> tuple[np.ndarray, float]:
         """`_free_spot` of object `name` in drawer region `place`: between the drawer's walls, clear of the cabinet
         over its back."""
-        floor = self.view.site_pos(place)[2] - self.view.site_half_size(place)[2] + 0.01
-        return self._free_spot(name, place, floor)
+        return self._free_spot(name, place, self.view.site_floor(place) + 0.01)
 
     def _target(self, relation: str, place: str, name: str) -> Target:
         """Goal location of carried object `name` for `(relation name place)`; place is an object or a site."""
@@ -331,8 +330,7 @@ class ScriptedExpert:
         yield from self._move(lambda: (v.body_pos(name) + grip, finger), OPEN, tol=0.006, max_steps=60,
                               max_speed=0.5, axis=axis)
         yield from self._hold(CLOSE, 12, finger, axis)
-        site, half = v.site_pos(place), v.site_half_size(place)
-        floor = site[2] - half[2] + 0.01
+        site, half, floor = v.site_pos(place), v.site_half_size(place), v.site_floor(place) + 0.01
         spot = self._free_spot(name, place, floor, roof_z=floor + v.box(name).height)[0]
         depth = site[:2] @ out + half[:2] @ np.abs(out) - 0.025  # the origin's coordinate along `out`
         goal = spot + out * (depth - spot @ out)
@@ -471,7 +469,7 @@ class ScriptedExpert:
             """A point `out` from the front's inner face (the region site's side), 2 cm above the floor."""
             site, half = v.site_pos(name), v.site_half_size(name)
             point = site + outward * (half @ np.abs(outward) - 0.015 + out)
-            return np.array([point[0], point[1], site[2] - half[2] + 0.02 + hover]), finger
+            return np.array([point[0], point[1], v.site_floor(name) + 0.02 + hover]), finger
 
         yield from self._move(lambda: at(0.0, 0.1), CLOSE, tol=0.02, max_steps=80)
         yield from self._move(lambda: at(0.0), CLOSE, tol=0.01, max_steps=60, max_speed=0.5)

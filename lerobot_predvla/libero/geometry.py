@@ -195,6 +195,10 @@ class SceneView:
         size = np.asarray(self.inner.object_sites_dict[name].size)
         return np.abs(self.sim.data.site_xmat[self.sim.model.site_name2id(name)].reshape(3, 3) @ size)
 
+    def site_floor(self, name: str) -> float:
+        """Height of the bottom face of region site `name` (a drawer's or a cavity's floor)."""
+        return float(self.site_pos(name)[2] - self.site_half_size(name)[2])
+
     def site_parent(self, name: str) -> str | None:
         site = self.inner.object_sites_dict.get(name)
         return getattr(site, "parent_name", None)
