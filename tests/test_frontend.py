@@ -221,3 +221,20 @@ def test_fit_frontend_rejects_bad_input_without_artefact(libero_root, tmp_path, 
     code = run_cli(["fit-frontend", "--hdf5-root", str(bad_root), "--suites", "libero_object",
                     "--vision-weights", "random", "--out", str(out)])
     assert code != 0 and "b_demo.hdf5" in capsys.readouterr().err and not out.exists()
+
+
+def test_language_pca_on_the_libero_task_list_separates_one_task(libero_root, tmp_path):
+    """Section 4.1: the language PCA is fitted on the 40 instructions of the four suites. Fitted on one task's
+    demonstrations alone its features are all zero; on the task list they carry 39 directions."""
+    from lerobot_predvla.libero.env import libero_instructions
+
+    instructions = libero_instructions()
+    assert len(set(instructions)) == 40 and INSTRUCTIONS[0] in instructions
+    for source, rank in (("demos", 0), ("libero", 39)):
+        out = tmp_path / source
+        assert run_cli(["fit-frontend", "--hdf5-root", str(libero_root), "--suites", "libero_object",
+                        "--vision-weights", "random", "--language-from", source, "--out", str(out)]) == 0
+        artefact = FrontendArtefact.load(out)
+        assert artefact.language.components_with_variance == rank
+        features = FrozenFrontend.load(out).encode_instructions([INSTRUCTIONS[0]])
+        assert bool(features.abs().sum() > 0) == (rank > 0)

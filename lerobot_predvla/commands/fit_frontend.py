@@ -13,6 +13,7 @@ from lerobot_predvla.frontend.vision import PRECISIONS, VisionWeights, VisionWei
 CONFIG_DEFAULTS = {f.name: f.default for f in fields(PredVLAConfig)}
 # Errors that are the user's input, reported in one line with a non-zero exit.
 INPUT_ERRORS = (ValueError, OSError, VisionWeightsError)
+LANGUAGE_SOURCES = ("demos", "libero")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -38,8 +39,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--vision-dim-per-camera", type=int, default=CONFIG_DEFAULTS["vision_dim_per_camera"])
     parser.add_argument("--frame-stride", type=int, default=1, help="Fit the visual PCA on every n-th frame.")
     parser.add_argument("--batch-size", type=int, default=64, help="Images per ResNet18 forward pass.")
+    parser.add_argument(
+        "--language-from", choices=LANGUAGE_SOURCES, default="demos",
+        help="Instructions the language PCA is fitted on: 'demos' (default; one per pooled demonstration) or "
+        "'libero' (all 40 instructions of LIBERO's four suites from its task list, Section 4.1; use it when "
+        "the demonstrations cover fewer suites: one task alone gives all-zero language features).",
+    )
     parser.add_argument("--out", type=Path, required=True, help="Output directory of the artefact.")
     parser.set_defaults(func=run)
+
+
+def _language_instructions(source: str) -> tuple[str, ...] | None:
+    if source == "demos":
+        return None
+    from lerobot_predvla.libero.env import libero_instructions
+
+    return libero_instructions()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
             preprocessing=PreprocessingSpec(image_size=args.image_size),
             frame_stride=args.frame_stride,
             batch_size=args.batch_size,
+            language_instructions=_language_instructions(args.language_from),
         )
         artefact = fit_frontend(cfg)
         artefact.save(args.out)

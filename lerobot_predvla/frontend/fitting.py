@@ -34,6 +34,11 @@ class FitFrontendConfig:
         preprocessing: Image preprocessing.
         frame_stride: Use every n-th frame for the visual PCA (1 = all frames).
         batch_size: Images per ResNet18 forward pass.
+        language_instructions: Instructions the language PCA is fitted on, one sample each. None (default):
+            one per pooled demonstration, as the paper does with the demonstrations of all four suites. With
+            demonstrations of fewer suites, pass the benchmark's task list (`libero_instructions()`: all 40
+            instructions of the four suites, Section 4.1) so that the basis is the paper's: otherwise one
+            task gives all-zero language features and two tasks a rank-1 basis.
     """
 
     hdf5_root: Path
@@ -45,6 +50,7 @@ class FitFrontendConfig:
     preprocessing: PreprocessingSpec = field(default_factory=PreprocessingSpec)
     frame_stride: int = 1
     batch_size: int = 64
+    language_instructions: tuple[str, ...] | None = None
 
 
 def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
@@ -66,8 +72,13 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
                 features[camera].append(vision(pixels))
             progress.update(len(demo.action))
 
-    # One instruction embedding per demonstration: each demonstration weighs the same.
-    instructions = [ref.instruction for ref in refs]
+    # One instruction embedding per demonstration (each demonstration weighs the same), or per instruction
+    # of the given task list.
+    demo_instructions = [ref.instruction for ref in refs]
+    instructions = list(cfg.language_instructions or demo_instructions)
+    missing = sorted(set(demo_instructions) - set(instructions))
+    if missing:
+        raise ValueError(f"language_instructions lack the demonstrations' instructions {missing}.")
     language_basis = fit_pca(language(instructions), cfg.language_dim)
     cameras = {camera: fit_pca(torch.cat(f).numpy(), cfg.vision_dim_per_camera) for camera, f in features.items()}
     return FrontendArtefact(
@@ -87,6 +98,7 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
             "num_frames": sum(ref.num_frames for ref in refs),
             "frame_stride": cfg.frame_stride,
             "num_distinct_instructions": len(set(instructions)),
+            "language_fit_on": "task list" if cfg.language_instructions else "demonstrations",
             "seconds": round(time.perf_counter() - start, 1),
             "versions": {
                 pkg: importlib.metadata.version(pkg)

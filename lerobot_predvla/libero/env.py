@@ -66,6 +66,14 @@ def task_spec(suite: str, task_id: int) -> TaskSpec:
     return TaskSpec(suite, task_id, task.name, task.language, bddl)
 
 
+def libero_instructions(suites: tuple[str, ...] = SUITES) -> tuple[str, ...]:
+    """The language instructions of every task of `suites` from LIBERO's task list (no demonstration needed):
+    40 for the four suites, the set the paper's language PCA is fitted on (Section 4.1)."""
+    _, benchmark = _libero()
+    benchmarks = benchmark.get_benchmark_dict()
+    return tuple(task.language for suite in suites for task in benchmarks[suite]().tasks)
+
+
 def num_tasks(suite: str) -> int:
     _, benchmark = _libero()
     return benchmark.get_benchmark_dict()[suite]().n_tasks
