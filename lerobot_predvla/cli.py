@@ -15,6 +15,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.commands.demos",
     "lerobot_predvla.commands.fit_frontend",
     "lerobot_predvla.commands.convert",
+    "lerobot_predvla.commands.inspect",
     "lerobot_predvla.commands.sweep",
     "lerobot_predvla.commands.report",
     "lerobot_predvla.commands.push",
