@@ -37,6 +37,7 @@ CORRUPTION_SOURCE = {"libero_spatial": "libero_goal", "libero_goal": "libero_obj
 CORRUPTION_KEYS = {"channel", "alpha", "source_suite", "episode", "open_loop"}
 EVAL_ENV_TYPE = "predvla_libero"  # LeRobot's LIBERO env with PredVLA's proprioception (libero/eval_config.py)
 TRAIN_DONE_FILE = "predvla_sweep_train.json"  # written beside a finished training's checkpoints
+EVAL_WALL_FILE = "predvla_sweep_eval.json"  # wall time of one evaluation part, beside its eval_info.json
 
 Executor = Callable[[list[str], Path], int]  # (command, log file) -> exit code
 
@@ -138,6 +139,38 @@ class Settings:
     eval_device: str = "cuda"
     env_type: str = EVAL_ENV_TYPE
     eval_args: list[str] = field(default_factory=list)
+    eval_tasks: list[int] | None = None  # evaluate task by task: one lerobot-eval (and one resumable unit) per task
+    data: dict[str, "DataSpec"] = field(default_factory=dict)  # suite -> how its dataset is made
+
+
+@dataclass
+class DataSpec:
+    """How `predvla sweep` makes a suite's dataset before training: expert demonstrations (`predvla demos`), the
+    front end (`predvla fit-frontend`) and the conversion (`predvla convert`) into the suite's `datasets` root.
+    Each stage is skipped when its output exists (demonstrations task by task), so a killed run resumes.
+
+    Args:
+        hdf5: Root of the demonstrations (`<hdf5>/<suite>/*_demo.hdf5`).
+        frontend: Directory of the fitted front-end artefact.
+        per_task: Successful expert demonstrations per task (the paper's datasets have 50).
+        tasks: Task ids (default: every task of the suite).
+        render_interval: Render the cameras every k-th step (4 = PredVLA's visual refresh).
+        demo_seed: Seed of the randomised resets of the demonstrations.
+        vision_weights: ResNet18 weights of the front end ('imagenet', a .pth file, or 'random': the offline
+            substitute, printed as such).
+        language_from: Instructions of the language PCA: 'libero' (all 40 of the task list, Section 4.1) or 'demos'.
+        frame_stride: Fit the visual PCA on every n-th frame.
+    """
+
+    hdf5: str
+    frontend: str
+    per_task: int = 50
+    tasks: list[int] | None = None
+    render_interval: int = 4
+    demo_seed: int = 0
+    vision_weights: str = "imagenet"
+    language_from: str = "libero"
+    frame_stride: int = 4
 
 
 @dataclass(frozen=True)
@@ -171,7 +204,7 @@ class Sweep:
             raw = yaml.safe_load(text)
         if not isinstance(raw, dict) or not raw.get("configs"):
             raise SweepError(f"{path}: expected a mapping with a non-empty `configs` list.")
-        unknown = set(raw) - {"seeds", "suites", "datasets", "train", "eval", "configs"}
+        unknown = set(raw) - {"seeds", "suites", "datasets", "data", "train", "eval", "configs"}
         if unknown:
             raise SweepError(f"{path}: unknown top-level keys {sorted(unknown)}.")
         train, evaluation = raw.get("train", {}), raw.get("eval", {})
@@ -192,6 +225,8 @@ class Sweep:
                 eval_device=str(evaluation.get("device", "cuda")),
                 env_type=str(evaluation.get("env_type", EVAL_ENV_TYPE)),
                 eval_args=list(evaluation.get("args", [])),
+                eval_tasks=[int(t) for t in evaluation["tasks"]] if "tasks" in evaluation else None,
+                data={suite: DataSpec(**spec) for suite, spec in raw.get("data", {}).items()},
             )
             configs = [ConfigSpec(**entry) for entry in raw["configs"]]
         except TypeError as err:
@@ -226,6 +261,9 @@ class Sweep:
             missing = [s for s in self.suites_of(spec) if s not in self.settings.datasets]
             if missing:
                 raise SweepError(f"{where}: `datasets` has no entry (repo_id, root) for suites {missing}.")
+        for suite in self.settings.data:
+            if not self.settings.datasets.get(suite, {}).get("root"):
+                raise SweepError(f"{where}: `data` makes {suite}'s dataset, so `datasets.{suite}` needs a `root`.")
 
     def validate_corruption(self, spec: ConfigSpec, where: Path) -> None:
         c = spec.corruption
@@ -450,6 +488,51 @@ class Runner:
         path = Path(value)
         return path if path.is_absolute() else (self.sweep.base_dir / path).resolve()
 
+    # ----- data ------------------------------------------------------------------------------------------
+    def data_commands(self, suite: str) -> list[tuple[str, list[str]]]:
+        """(stage, command) still to run to make `suite`'s dataset; empty when it exists or has no `data` entry."""
+        spec = self.sweep.settings.data.get(suite)
+        if spec is None:
+            return []
+        dataset = self._path(self.sweep.settings.datasets[suite]["root"])
+        if (dataset / "meta" / "info.json").is_file():
+            return []
+        hdf5, frontend = self._path(spec.hdf5), self._path(spec.frontend)
+        predvla = [sys.executable, "-m", "lerobot_predvla.cli"]
+        commands = []
+        missing = self.missing_demo_tasks(suite, spec, hdf5)
+        if missing:
+            commands.append(("demos", [*predvla, "demos", "--suite", suite, "--tasks", ",".join(map(str, missing)),
+                                       "--per-task", str(spec.per_task), "--render-interval", str(spec.render_interval),
+                                       "--seed", str(spec.demo_seed), "--out", str(hdf5)]))
+        if not (frontend / "metadata.json").is_file():
+            commands.append(("frontend", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", suite,
+                                          "--vision-weights", spec.vision_weights, "--language-from",
+                                          spec.language_from, "--frame-stride", str(spec.frame_stride),
+                                          "--out", str(frontend)]))
+        commands.append(("convert", [*predvla, "convert", "--hdf5-root", str(hdf5), "--suite", suite,
+                                     "--frontend", str(frontend), "--out", str(dataset),
+                                     "--repo-id", self.sweep.settings.datasets[suite]["repo_id"]]))
+        return commands
+
+    @staticmethod
+    def missing_demo_tasks(suite: str, spec: DataSpec, hdf5: Path) -> list[int]:
+        from .libero.env import num_tasks, task_spec
+        from .libero.hdf5_layout import task_file
+
+        tasks = spec.tasks if spec.tasks is not None else range(num_tasks(suite))
+        return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]
+
+    def make_data(self, suite: str) -> bool:
+        """Run the missing data stages of `suite`; False when one failed."""
+        for stage, command in self.data_commands(suite):
+            code = self.execute(command, self.log_path("data", suite, 0, stage))
+            if code != 0:
+                print(f"predvla sweep: data stage {stage} of {suite} failed (exit {code}); see "
+                      f"{self.log_path('data', suite, 0, stage)}", file=sys.stderr)
+                return False
+        return True
+
     # ----- running ----------------------------------------------------------------------------------------
     def write_plan(self, runs: list[Run]) -> None:
         """`plan.json`: every run of the sweep and its configuration, so the report can mark missing runs."""
@@ -468,11 +551,14 @@ class Runner:
 
     def pending_commands(self, configs: list[str] | None, shard: tuple[int, int]) -> list[list[str]]:
         """The commands `run` would start now (for --dry-run); a resumed training shows its resume command."""
-        commands = []
+        commands, data_done = [], set()
         for (trained, suite, seed), unit_runs in self.shard_units(configs, shard):
             pending = [r for r in unit_runs if not self.record_path(r).is_file()]
             if not pending:
                 continue
+            if suite not in data_done:
+                commands += [command for _, command in self.data_commands(suite)]
+                data_done.add(suite)
             out = self.train_dir(trained, suite, seed)
             if (out / TRAIN_DONE_FILE).is_file():
                 checkpoint = Path(json.loads((out / TRAIN_DONE_FILE).read_text())["checkpoint"])
@@ -482,7 +568,7 @@ class Runner:
             else:
                 commands.append(self.train_command(self.sweep.configs[trained], suite, seed))
                 checkpoint = out / "checkpoints" / "last" / "pretrained_model"
-            commands += [self.eval_command(run, checkpoint) for run in pending]
+            commands += [command for run in pending for command in self.pending_eval_commands(run, checkpoint)]
         return commands
 
     def run(
@@ -502,7 +588,7 @@ class Runner:
             if not pending:
                 continue
             trained_spec = self.sweep.configs[trained]
-            train_result = self.train(trained_spec, suite, seed)
+            train_result = self.train(trained_spec, suite, seed) if self.make_data(suite) else None
             for run in pending:
                 bar.set_postfix_str(run.key)
                 ok = train_result is not None and self.evaluate(run, train_result)
@@ -540,19 +626,45 @@ class Runner:
         atomic_write_json(done, result)
         return result
 
+    def eval_parts(self, run: Run) -> list[tuple[Path, list[str]]]:
+        """(output directory, extra lerobot-eval arguments) of each part of a run's evaluation: the whole suite
+        at once, or one part per task with `eval.tasks`, each finished part kept when the run is redone."""
+        out = self.eval_dir(run)
+        tasks = self.sweep.settings.eval_tasks
+        if tasks is None:
+            return [(out, [])]
+        return [(out / f"task{t}", [f"--env.task_ids=[{t}]"]) for t in tasks]
+
+    def part_command(self, run: Run, checkpoint: Path, out: Path, extra: list[str]) -> list[str]:
+        command = [*self.eval_command(run, checkpoint), *extra]
+        command[command.index(f"--output_dir={self.eval_dir(run)}")] = f"--output_dir={out}"
+        return command
+
+    def pending_eval_commands(self, run: Run, checkpoint: Path) -> list[list[str]]:
+        return [self.part_command(run, checkpoint, out, extra) for out, extra in self.eval_parts(run)
+                if not (out / "eval_info.json").is_file()]
+
     def evaluate(self, run: Run, trained: dict) -> bool:
         spec = self.sweep.configs[run.config]
-        out = self.eval_dir(run)
-        shutil.rmtree(out, ignore_errors=True)  # a killed evaluation is redone from scratch
-        command = self.eval_command(run, Path(trained["checkpoint"]))
-        start = time.monotonic()
-        code = self.execute(command, self.log_path(run.config, run.suite, run.seed, "eval"))
-        info = out / "eval_info.json"
-        if code != 0 or not info.is_file():
-            print(f"predvla sweep: evaluation {run.key} failed (exit {code}); see "
-                  f"{self.log_path(run.config, run.suite, run.seed, 'eval')}", file=sys.stderr)
-            return False
-        tasks = parse_eval_info(info)
+        tasks, commands, wall = {}, [], 0.0
+        for out, extra in self.eval_parts(run):
+            info = out / "eval_info.json"
+            command = self.part_command(run, Path(trained["checkpoint"]), out, extra)
+            commands.append(command)
+            start = time.monotonic()
+            if not info.is_file():
+                shutil.rmtree(out, ignore_errors=True)  # a killed evaluation is redone from scratch
+                code = self.execute(command, self.log_path(run.config, run.suite, run.seed, "eval"))
+                if code != 0 or not info.is_file():
+                    print(f"predvla sweep: evaluation {run.key} failed (exit {code}); see "
+                          f"{self.log_path(run.config, run.suite, run.seed, 'eval')}", file=sys.stderr)
+                    return False
+                atomic_write_json(out / EVAL_WALL_FILE, {"eval_wall_s": round(time.monotonic() - start, 1)})
+            tasks.update(parse_eval_info(info))
+            wall_file = out / EVAL_WALL_FILE
+            wall += json.loads(wall_file.read_text())["eval_wall_s"] if wall_file.is_file() else 0.0
+        tasks = dict(sorted(tasks.items(), key=lambda kv: int(kv[0])))
+        command = commands[0] if len(commands) == 1 else commands
         successes = sum(t["successes"] for t in tasks.values())
         episodes = sum(t["episodes"] for t in tasks.values())
         record = {
@@ -575,7 +687,7 @@ class Runner:
             "n_episodes_per_task": spec.n_episodes or self.sweep.settings.n_episodes,
             "episode_length": self.sweep.settings.episode_length,
             "train_wall_s": trained["train_wall_s"],
-            "eval_wall_s": round(time.monotonic() - start, 1),
+            "eval_wall_s": round(wall, 1),
             "checkpoint": trained["checkpoint"],
             "commands": {"train": trained["command"], "eval": command},
             "versions": versions(),

@@ -66,7 +66,7 @@ class FakeLeRobot:
             seed, n = int(arg(command, "seed")), int(arg(command, "eval.n_episodes"))
             per_task = [{"task_group": arg(command, "env.task"), "task_id": t,
                          "metrics": {"successes": [i < n - t - seed for i in range(n)], "sum_rewards": [0] * n}}
-                        for t in range(3)]
+                        for t in json.loads(arg(command, "env.task_ids") or "[0, 1, 2]")]
             (out / "eval_info.json").write_text(json.dumps({"per_task": per_task, "overall": {}}))
             return 0
         if arg(command, "config_path"):  # resume
@@ -279,6 +279,18 @@ def test_the_libero_demo_sweep_file_is_valid():
     assert sweep.settings.datasets["libero_object"]["root"].endswith("outputs/libero_demo/dataset")
 
 
+def test_the_libero_object_cpu_sweep_file_is_valid(tmp_path):
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "libero_object_cpu.yaml")
+    assert sweep.settings.eval_tasks == list(range(10))
+    assert sweep.settings.data["libero_object"].language_from == "libero"
+    runner = Runner(sweep, tmp_path)
+    train = runner.train_command(sweep.configs["predvla_cpu"], "libero_object", 0)
+    assert "--policy.complexity_weights=[0.5,0.2,0.2,0.1]" in train and "--policy.optimizer_lr=0.001" in train
+    table2 = runner.train_command(sweep.configs["predvla_cpu_table2_complexity"], "libero_object", 0)
+    assert "--policy.complexity_weights=[0.05,0.02,0.02,0.01]" in table2
+    assert "--policy.type=predvla_bc_rnn" in runner.train_command(sweep.configs["B2"], "libero_object", 0)
+
+
 def test_paper_sweep_reads_every_policy_file():
     """configs/policy/*.json are `lerobot-train --config_path` files; the sweep takes their nested policy."""
     sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")
@@ -319,3 +331,60 @@ def test_the_paper_sweep_has_every_corruption_point():
     sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")
     points = {(s.corruption["channel"], s.corruption["alpha"]) for s in sweep.configs.values() if s.corruption}
     assert points == {(c, a) for c in ("vision", "proprio") for a in (0.25, 0.5, 0.75, 1.0)}
+
+
+class FakeData(FakeLeRobot):
+    """Also stands in for `predvla demos`, `fit-frontend` and `convert`, writing the files they would write."""
+
+    def __call__(self, command: list[str], log: Path) -> int:
+        if "lerobot_predvla.cli" not in command:
+            return super().__call__(command, log)
+        self.commands.append(command)
+        stage, value = command[command.index("lerobot_predvla.cli") + 1], dict(zip(command, command[1:], strict=False))
+        if stage == "demos":
+            from lerobot_predvla.libero.env import task_spec
+            from lerobot_predvla.libero.hdf5_layout import task_file
+
+            for task in value["--tasks"].split(","):
+                path = task_file(Path(value["--out"]), task_spec(value["--suite"], int(task)))
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text("demos")
+        elif stage == "fit-frontend":
+            Path(value["--out"]).mkdir(parents=True)
+            (Path(value["--out"]) / "metadata.json").write_text("{}")
+        else:
+            (Path(value["--out"]) / "meta").mkdir(parents=True)
+            (Path(value["--out"]) / "meta" / "info.json").write_text("{}")
+        return 0
+
+
+def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
+    """`data` makes the dataset (demonstrations task by task, front end, conversion), each stage skipped once its
+    output exists; `eval.tasks` evaluates task by task and keeps the finished tasks of a killed evaluation."""
+    data = {"libero_object": {"hdf5": "out/hdf5", "frontend": "out/frontend", "per_task": 3, "tasks": [0, 1],
+                              "vision_weights": "random"}}
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], data=data,
+                      eval={"device": "cpu", "tasks": [0, 1], "n_episodes": 4})
+    runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FakeData())
+    from lerobot_predvla.libero.env import task_spec
+    from lerobot_predvla.libero.hdf5_layout import task_file
+
+    done_task = task_file(tmp_path / "out/hdf5", task_spec("libero_object", 1))  # a killed demos run left task 1
+    done_task.parent.mkdir(parents=True)
+    done_task.write_text("demos")
+    stages = [c[c.index("lerobot_predvla.cli") + 1:] for c in runner.pending_commands(["predvla"], (0, 1))[:3]]
+    assert [s[0] for s in stages] == ["demos", "fit-frontend", "convert"]
+    assert stages[0][stages[0].index("--tasks") + 1] == "0" and "--language-from" in stages[1]
+    # Evaluation of task 0 finished before the run was killed: only task 1 is evaluated again.
+    task0 = runner.eval_dir(Run("predvla", "libero_object", 0)) / "task0"
+    task0.mkdir(parents=True)
+    (task0 / "eval_info.json").write_text(json.dumps({"per_task": [
+        {"task_id": 0, "metrics": {"successes": [True, True, False, True]}}]}))
+    outcome = runner.run(configs=["predvla"], progress=False)
+    assert outcome["done"] == ["predvla/libero_object/seed0"]
+    evals = [c for c in runner.execute.commands if any(x.endswith("lerobot-eval") for x in c)]
+    assert len(evals) == 1 and "--env.task_ids=[1]" in evals[0] and arg(evals[0], "output_dir").endswith("task1")
+    record = json.loads(runner.record_path(Run("predvla", "libero_object", 0)).read_text())
+    assert record["tasks"]["0"] == {"successes": 3, "episodes": 4} and record["episodes"] == 8
+    assert (tmp_path / "data/libero_object/meta/info.json").is_file()
+    assert runner.data_commands("libero_object") == []  # the dataset exists: nothing to make
