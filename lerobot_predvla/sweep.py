@@ -400,6 +400,7 @@ class Runner:
     lerobot_train: str = str(Path(sys.executable).with_name("lerobot-train"))
     lerobot_eval: str = str(Path(sys.executable).with_name("lerobot-eval"))
     accelerate: str = str(Path(sys.executable).with_name("accelerate"))
+    torchrun: str = str(Path(sys.executable).with_name("torchrun"))
 
     # ----- paths --------------------------------------------------------------------------------------------
     def train_dir(self, config: str, suite: str, seed: int) -> Path:
@@ -416,10 +417,14 @@ class Runner:
 
     # ----- commands ---------------------------------------------------------------------------------------
     def launcher(self) -> list[str]:
-        """`lerobot-train`, or LeRobot's multi-GPU path `accelerate launch --multi_gpu` for several processes."""
+        """`lerobot-train`, or for several processes LeRobot's multi-GPU path `accelerate launch --multi_gpu`; on
+        the CPU `torchrun` (accelerate's Accelerator then runs DDP over gloo: `accelerate launch --cpu` starts one
+        process only)."""
         procs = self.sweep.settings.accelerate_processes
         if procs == 1:
             return [self.lerobot_train]
+        if self.sweep.settings.train_device == "cpu":
+            return [self.torchrun, f"--nproc_per_node={procs}", self.lerobot_train]
         return [self.accelerate, "launch", "--multi_gpu", f"--num_processes={procs}", self.lerobot_train]
 
     def train_command(self, spec: ConfigSpec, suite: str, seed: int) -> list[str]:

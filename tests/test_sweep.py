@@ -161,7 +161,7 @@ def test_flags_shrink_the_protocol_and_accelerate_launch(tmp_path, capsys):
     path = sweep_file(tmp_path)
     code = predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs"), "--dry-run", "--configs", "A6",
                          "--steps", "5", "--n-episodes", "2", "--episode-length", "100", "--seeds", "3",
-                         "--suites", "libero_object", "--accelerate-processes", "2"])
+                         "--suites", "libero_object", "--accelerate-processes", "2", "--device", "cuda"])
     assert code == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert len(lines) == 2  # train predvla (the checkpoint A6 needs), evaluate A6
@@ -169,6 +169,10 @@ def test_flags_shrink_the_protocol_and_accelerate_launch(tmp_path, capsys):
     assert " launch --multi_gpu --num_processes=2 " in train and "--batch_size=16" in train and "--steps=5" in train
     assert "--seed=3" in train and "libero_object" in train
     assert "--eval.n_episodes=2" in evaluate and "--env.episode_length=100" in evaluate
+    code = predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs"), "--dry-run", "--configs", "A6",
+                         "--suites", "libero_object", "--seeds", "3", "--accelerate-processes", "2", "--device", "cpu"])
+    train = capsys.readouterr().out.strip().splitlines()[0]
+    assert "torchrun --nproc_per_node=2 " in train and "--policy.device=cpu" in train  # DDP on CPU: torchrun
     assert not (tmp_path / "runs" / "records").exists()
 
 
