@@ -529,13 +529,19 @@ class Runner:
         return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]
 
     def make_data(self, suite: str) -> bool:
-        """Run the missing data stages of `suite`; False when one failed."""
+        """Run the missing data stages of `suite`, recording each one's command and wall time in
+        `RUNS_DIR/data/<suite>.json`; False when one failed."""
+        stages_file = self.runs_dir / "data" / f"{suite}.json"
         for stage, command in self.data_commands(suite):
+            start = time.monotonic()
             code = self.execute(command, self.log_path("data", suite, 0, stage))
             if code != 0:
                 print(f"predvla sweep: data stage {stage} of {suite} failed (exit {code}); see "
                       f"{self.log_path('data', suite, 0, stage)}", file=sys.stderr)
                 return False
+            stages = json.loads(stages_file.read_text()) if stages_file.is_file() else {}
+            stages[stage] = {"command": command, "wall_s": round(time.monotonic() - start, 1)}
+            atomic_write_json(stages_file, stages)
         return True
 
     # ----- running ----------------------------------------------------------------------------------------

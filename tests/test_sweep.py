@@ -392,3 +392,5 @@ def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
     assert record["tasks"]["0"] == {"successes": 3, "episodes": 4} and record["episodes"] == 8
     assert (tmp_path / "data/libero_object/meta/info.json").is_file()
     assert runner.data_commands("libero_object") == []  # the dataset exists: nothing to make
+    stages = json.loads((tmp_path / "runs/data/libero_object.json").read_text())
+    assert list(stages) == ["demos", "frontend", "convert"] and stages["convert"]["wall_s"] >= 0

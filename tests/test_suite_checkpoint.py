@@ -1,0 +1,38 @@
+"""The committed libero_object suite checkpoint loads through LeRobot's own `make_policy` path and acts on a real
+LIBERO observation (the quickstart's `lerobot-eval --policy.path=checkpoints/predvla_libero_object`)."""
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+CHECKPOINT = Path(__file__).parents[1] / "checkpoints" / "predvla_libero_object"
+
+
+def test_suite_checkpoint_loads_with_make_policy_and_acts_on_libero():
+    from lerobot.configs.policies import PreTrainedConfig
+    from lerobot.envs.utils import preprocess_observation
+    from lerobot.policies.factory import make_policy, make_pre_post_processors
+
+    from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+    from lerobot_predvla.libero.eval_config import PredVLALiberoEnv
+
+    assert not (CHECKPOINT / "posterior_store.safetensors").exists()  # training posteriors are never shipped
+    config = PreTrainedConfig.from_pretrained(CHECKPOINT)
+    config.pretrained_path = CHECKPOINT
+    env_cfg = PredVLALiberoEnv(task="libero_object", task_ids=[3])
+    policy = make_policy(config, env_cfg=env_cfg)
+    assert sum(p.numel() for p in policy.parameters()) == 675_732
+    pre, post = make_pre_post_processors(config, pretrained_path=str(CHECKPOINT))
+    env_pre, env_post = env_cfg.get_env_processors()
+    venv = env_cfg.create_envs(n_envs=1)["libero_object"][3]
+    try:
+        obs, _ = venv.reset(seed=[0])
+        policy.reset()
+        for _ in range(2):
+            with torch.inference_mode():
+                action = post(policy.select_action(pre(env_pre(preprocess_observation(obs)))))
+            assert action.shape == (1, 7) and torch.isfinite(action).all()
+            obs, *_ = venv.step(np.asarray(action))
+    finally:
+        venv.close()
