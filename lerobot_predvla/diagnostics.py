@@ -171,10 +171,10 @@ def replay_error_regression(policy: PredVLAPolicy, data: TaskData, episodes: lis
             eps_v, eps_q = model.prediction_errors(traj, torch.stack(er.vision), torch.stack(er.proprio))
             c_p = model.priors(traj)
             complexity = model.complexity(c_q[-1:], c_p[-1:], (cfg.er_complexity_weight,) * 4)[0]
-            fresh = float(er.fresh[-1])
-            records["eps_v"].append(eps_v[-1] * fresh + (1 - fresh) * float("nan"))
+            fresh = er.fresh[-1]  # the visual error counts on refresh steps only (Section 4.3)
+            records["eps_v"].append(eps_v[-1] if fresh else torch.full_like(eps_v[-1], float("nan")))
             records["eps_q"].append(eps_q[-1])
-            records["free_energy"].append(cfg.er_lambda_v * eps_v[-1] * fresh + cfg.er_lambda_q * eps_q[-1]
+            records["free_energy"].append(cfg.er_lambda_v * eps_v[-1] * float(fresh) + cfg.er_lambda_q * eps_q[-1]
                                           + complexity)
             records["gap"].append((c_q[-1] - c_p[-1]).unflatten(-1, (4, r)).norm(dim=-1))
             records["action"].append(traj.final.a_hat)

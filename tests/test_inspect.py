@@ -33,6 +33,7 @@ def test_inspect_reports_every_checkpoint_and_draws_the_figures(trained, tmp_pat
     assert all(p["mean_norm"] > 0 for p in last["posteriors"].values())  # 4 steps of Adam moved them
     er = last["error_regression"]
     assert er["er_action_mse"] >= 0 and er["open_loop_action_mse"] >= 0
+    assert er["er_eps_v"] > 0 and er["er_eps_q"] > 0  # finite: the visual error of the refresh steps
     for name in ("open_loop_vs_demos", "language_swap", "prior_posterior_gap", "errors_over_episode",
                  "training_curves"):
         assert (out / f"{name}.png").stat().st_size > 1000
