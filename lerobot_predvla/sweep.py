@@ -572,7 +572,7 @@ class Runner:
                 data_done.add(suite)
             out = self.train_dir(trained, suite, seed)
             if (out / TRAIN_DONE_FILE).is_file():
-                checkpoint = Path(json.loads((out / TRAIN_DONE_FILE).read_text())["checkpoint"])
+                checkpoint = self.trained_checkpoint(json.loads((out / TRAIN_DONE_FILE).read_text()))
             elif (out / "checkpoints" / "last" / "pretrained_model" / "train_config.json").is_file():
                 commands.append(self.resume_command(out))
                 checkpoint = out / "checkpoints" / "last" / "pretrained_model"
@@ -608,6 +608,11 @@ class Runner:
         bar.close()
         return outcome
 
+    def trained_checkpoint(self, trained: dict) -> Path:
+        """The checkpoint of a finished training (`TRAIN_DONE_FILE`), kept relative to RUNS_DIR so that a sweep
+        directory moved to another machine, or pointed at a committed checkpoint, still finds it."""
+        return (self.runs_dir / trained["checkpoint"]).resolve()
+
     def train(self, spec: ConfigSpec, suite: str, seed: int) -> dict | None:
         """Train (or resume, or reuse) one checkpoint; None when lerobot-train failed."""
         out = self.train_dir(spec.name, suite, seed)
@@ -627,7 +632,7 @@ class Runner:
                   f"{self.log_path(spec.name, suite, seed, 'train')}", file=sys.stderr)
             return None
         result = {
-            "checkpoint": str(last.resolve()),
+            "checkpoint": os.path.relpath(last.resolve(), self.runs_dir.resolve()),
             "steps": self.sweep.steps_of(spec),
             "parameters": count_model_parameters(last),
             "train_wall_s": round(time.monotonic() - start, 1),
@@ -660,7 +665,7 @@ class Runner:
         tasks, commands, wall = {}, [], 0.0
         for out, extra in self.eval_parts(run):
             info = out / "eval_info.json"
-            command = self.part_command(run, Path(trained["checkpoint"]), out, extra)
+            command = self.part_command(run, self.trained_checkpoint(trained), out, extra)
             commands.append(command)
             start = time.monotonic()
             if not info.is_file():
