@@ -30,8 +30,11 @@ def test_suite_checkpoint_loads_with_make_policy_and_acts_on_libero():
         obs, _ = venv.reset(seed=[0])
         policy.reset()
         for _ in range(2):
+            # As lerobot-eval: the task string from the sub-environment beside the observation.
+            observation = {**preprocess_observation(obs), "task": list(venv.call("task_description"))}
+            assert observation["task"] == ["pick up the bbq sauce and place it in the basket"]
             with torch.inference_mode():
-                action = post(policy.select_action(pre(env_pre(preprocess_observation(obs)))))
+                action = post(policy.select_action(pre(env_pre(observation))))
             assert action.shape == (1, 7) and torch.isfinite(action).all()
             obs, *_ = venv.step(np.asarray(action))
     finally:
