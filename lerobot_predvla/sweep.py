@@ -567,10 +567,10 @@ class Runner:
             pending = [r for r in unit_runs if not self.record_path(r).is_file()]
             if not pending:
                 continue
-            if suite not in data_done:
+            out = self.train_dir(trained, suite, seed)
+            if suite not in data_done and not (out / TRAIN_DONE_FILE).is_file():
                 commands += [command for _, command in self.data_commands(suite)]
                 data_done.add(suite)
-            out = self.train_dir(trained, suite, seed)
             if (out / TRAIN_DONE_FILE).is_file():
                 checkpoint = self.trained_checkpoint(json.loads((out / TRAIN_DONE_FILE).read_text()))
             elif (out / "checkpoints" / "last" / "pretrained_model" / "train_config.json").is_file():
@@ -599,7 +599,7 @@ class Runner:
             if not pending:
                 continue
             trained_spec = self.sweep.configs[trained]
-            train_result = self.train(trained_spec, suite, seed) if self.make_data(suite) else None
+            train_result = self.train(trained_spec, suite, seed)
             for run in pending:
                 bar.set_postfix_str(run.key)
                 ok = train_result is not None and self.evaluate(run, train_result)
@@ -619,6 +619,8 @@ class Runner:
         done = out / TRAIN_DONE_FILE
         if done.is_file():
             return json.loads(done.read_text())
+        if not self.make_data(suite):  # the dataset is needed only to train: evaluations never read it
+            return None
         last = out / "checkpoints" / "last" / "pretrained_model"
         if (last / "train_config.json").is_file():
             command, resumed = self.resume_command(out), True

@@ -394,3 +394,12 @@ def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
     assert runner.data_commands("libero_object") == []  # the dataset exists: nothing to make
     stages = json.loads((tmp_path / "runs/data/libero_object.json").read_text())
     assert list(stages) == ["demos", "frontend", "convert"] and stages["convert"]["wall_s"] >= 0
+    # On another machine with the finished training but no dataset, evaluating makes no data.
+    import shutil
+
+    shutil.rmtree(tmp_path / "data")
+    shutil.rmtree(runner.eval_dir(Run("predvla", "libero_object", 0)))
+    runner.record_path(Run("predvla", "libero_object", 0)).unlink()
+    runner.execute = FakeData()
+    assert runner.run(configs=["predvla"], progress=False)["done"] == ["predvla/libero_object/seed0"]
+    assert all("lerobot_predvla.cli" not in c for c in runner.execute.commands)
