@@ -6,6 +6,7 @@ from pathlib import Path
 from lerobot.configs import PreTrainedConfig
 from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
 from lerobot.optim.optimizers import AdamConfig
+from lerobot.optim.schedulers import CosineDecayWithWarmupSchedulerConfig
 from lerobot.utils.constants import ACTION, OBS_STATE
 
 # Cached front-end columns written by the converter (`predvla convert`).
@@ -83,6 +84,10 @@ class PredVLAConfig(PreTrainedConfig):
         train_batch_size: Paper's batch size (Table 2: 32); passed to lerobot-train's `--batch_size`.
         optimizer_lr: Adam learning rate of the network weights (Table 2: 6e-5, constant).
         posterior_lr: Adam learning rate of the training posteriors c_q (Table 2: 1e-2).
+        lr_decay_to: None (default): constant learning rates (Table 2). A value: the network learning rate decays
+            along a cosine from `optimizer_lr` to this value over the run (`--steps`, at most `train_steps`),
+            and the posterior learning rate by the same factor (LeRobot's `cosine_decay_with_warmup`, no
+            warm-up). A CPU-recipe option: short high-rate runs end on noisy weights otherwise.
         optimizer_weight_decay: Weight decay on network weights only (Table 2: 1e-4); the posteriors
             have none.
         grad_clip_norm: Gradient-norm clip (Table 2: "enabled"; the value is not given, 1.0 is ours).
@@ -151,6 +156,7 @@ class PredVLAConfig(PreTrainedConfig):
     train_batch_size: int = 32
     optimizer_lr: float = 6e-5
     posterior_lr: float = 1e-2
+    lr_decay_to: float | None = None
     optimizer_weight_decay: float = 1e-4
     grad_clip_norm: float = 1.0
     lambda_v: float = 1.0
@@ -230,8 +236,12 @@ class PredVLAConfig(PreTrainedConfig):
             grad_clip_norm=self.grad_clip_norm,
         )
 
-    def get_scheduler_preset(self) -> None:
-        return None  # Table 2: constant learning rate.
+    def get_scheduler_preset(self) -> CosineDecayWithWarmupSchedulerConfig | None:
+        if self.lr_decay_to is None:
+            return None  # Table 2: constant learning rate.
+        return CosineDecayWithWarmupSchedulerConfig(
+            num_warmup_steps=0, num_decay_steps=self.train_steps, peak_lr=self.optimizer_lr, decay_lr=self.lr_decay_to
+        )
 
     def validate_features(self) -> None:
         validate_cached_features(self, "PredVLA")

@@ -252,3 +252,22 @@ def test_save_and_load_reproduce_actions(trained_policy, tmp_path):
     assert loaded.posterior_store is None
     obs = stream(12, seed=7)
     assert torch.equal(run(trained_policy, obs), run(loaded, obs))
+
+
+def test_lr_decay_option_decays_both_groups_along_a_cosine():
+    """`lr_decay_to` (a CPU-recipe option; Table 2 is constant): cosine from optimizer_lr to the value, the
+    posterior group scaled by the same factor."""
+    import torch
+
+    config = PredVLAConfig(optimizer_lr=1e-3, lr_decay_to=1e-4)
+    network, posteriors = torch.nn.Parameter(torch.zeros(1)), torch.nn.Parameter(torch.zeros(1))
+    optimizer = torch.optim.Adam([{"params": [network]}, {"params": [posteriors], "lr": config.posterior_lr}],
+                                 lr=config.optimizer_lr)
+    scheduler = config.get_scheduler_preset().build(optimizer, num_training_steps=100)
+    rates = []
+    for _ in range(101):
+        rates.append([g["lr"] for g in optimizer.param_groups])
+        optimizer.step()
+        scheduler.step()
+    assert rates[0] == pytest.approx([1e-3, 1e-2]) and rates[50] == pytest.approx([5.5e-4, 5.5e-3])
+    assert rates[100] == pytest.approx([1e-4, 1e-3])
