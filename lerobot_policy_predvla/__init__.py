@@ -5,9 +5,9 @@ B1-B4) and `predvla_ladder` (ladder rungs L2-L5, L2b).
 """
 
 from lerobot_predvla import PredVLAConfig, PredVLAPolicy, make_predvla_pre_post_processors
-from lerobot_predvla.configuration_predvla_bc_rnn import PredVLABCRNNConfig
-from lerobot_predvla.configuration_predvla_bc_transformer import PredVLABCTransformerConfig
-from lerobot_predvla.configuration_predvla_ladder import PredVLALadderConfig
+from lerobot_predvla.policies.bc_rnn.configuration_predvla_bc_rnn import PredVLABCRNNConfig
+from lerobot_predvla.policies.bc_transformer.configuration_predvla_bc_transformer import PredVLABCTransformerConfig
+from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PredVLALadderConfig
 
 __all__ = [
     "PredVLABCRNNConfig",

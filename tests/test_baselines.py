@@ -16,12 +16,15 @@ from test_policy import observation
 
 import lerobot_policy_predvla  # noqa: F401  (registers the policy types, as LeRobot's plugin loader does)
 from lerobot_predvla import PredVLAConfig, PredVLAPolicy
-from lerobot_predvla.configuration_predvla_ladder import PredVLALadderConfig
-from lerobot_predvla.corruption import replaced
-from lerobot_predvla.modeling_predvla_bc_transformer import PredVLABCTransformerConfig, PredVLABCTransformerPolicy
-from lerobot_predvla.modeling_predvla_ladder import PredVLALadderPolicy
-from lerobot_predvla.observation_policy import count_trainable
-from lerobot_predvla.sequence_table import read_columns
+from lerobot_predvla.policies.bc_transformer.modeling_predvla_bc_transformer import (
+    PredVLABCTransformerConfig,
+    PredVLABCTransformerPolicy,
+)
+from lerobot_predvla.policies.common.observation_policy import count_trainable
+from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PredVLALadderConfig
+from lerobot_predvla.policies.ladder.modeling_predvla_ladder import PredVLALadderPolicy
+from lerobot_predvla.policies.predvla.corruption import replaced
+from lerobot_predvla.policies.predvla.sequence_table import read_columns
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "policy"
 PREDVLA = 675_732

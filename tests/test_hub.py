@@ -17,14 +17,14 @@ import pytest
 import torch
 
 from lerobot_predvla import PredVLAPolicy
-from lerobot_predvla.cli import main as predvla_main
+from lerobot_predvla.cli.main import main as predvla_main
+from lerobot_predvla.experiments.report import write_report
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.pca import PCABasis
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import VisionWeights
-from lerobot_predvla.hub import MINILM_PARAMS, RESNET18_BACKBONE_PARAMS
-from lerobot_predvla.posterior_store import POSTERIOR_STORE_FILE
-from lerobot_predvla.report import write_report
+from lerobot_predvla.hub.publish import MINILM_PARAMS, RESNET18_BACKBONE_PARAMS
+from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 
 REPO = "someone/predvla_test"
 

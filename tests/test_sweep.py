@@ -12,9 +12,9 @@ import torch.multiprocessing as mp
 import yaml
 from safetensors.torch import save_file
 
-from lerobot_predvla.cli import main as predvla_main
-from lerobot_predvla.report import write_report
-from lerobot_predvla.sweep import (
+from lerobot_predvla.cli.main import main as predvla_main
+from lerobot_predvla.experiments.report import write_report
+from lerobot_predvla.experiments.sweep import (
     TRAIN_DONE_FILE,
     Run,
     Runner,

@@ -9,9 +9,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from lerobot_predvla.data.libero_hdf5 import CAMERAS, read_demo, scan_suites
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.language import LanguageEncoder
-from lerobot_predvla.frontend.libero_hdf5 import CAMERAS, read_demo, scan_suites
 from lerobot_predvla.frontend.pca import fit_pca
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec, libero_hdf5_to_lerobot, preprocess_images
 from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
