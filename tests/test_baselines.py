@@ -20,11 +20,11 @@ from lerobot_predvla.policies.bc_transformer.modeling_predvla_bc_transformer imp
     PredVLABCTransformerConfig,
     PredVLABCTransformerPolicy,
 )
-from lerobot_predvla.policies.common.observation_policy import count_trainable
 from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PredVLALadderConfig
 from lerobot_predvla.policies.ladder.modeling_predvla_ladder import PredVLALadderPolicy
 from lerobot_predvla.policies.predvla.corruption import replaced
 from lerobot_predvla.policies.predvla.sequence_table import read_columns
+from lerobot_predvla.utils.parameters import count_parameters
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "policy"
 PREDVLA = 675_732
@@ -62,7 +62,7 @@ def test_every_table_row_has_a_config():
 def test_parameter_count_matches_the_paper(name):
     config = preset(name)
     policy = get_policy_class(config.type)(config)
-    ours, (paper, exact) = count_trainable(policy), PAPER_PARAMETERS[name]
+    ours, (paper, exact) = count_parameters(policy), PAPER_PARAMETERS[name]
     if exact:
         assert ours == paper
     else:

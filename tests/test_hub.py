@@ -25,6 +25,7 @@ from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import VisionWeights
 from lerobot_predvla.hub.publish import MINILM_PARAMS, RESNET18_BACKBONE_PARAMS
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
+from lerobot_predvla.utils.checkpoints import last_pretrained
 
 REPO = "someone/predvla_test"
 
@@ -83,7 +84,7 @@ def trained_and_pushed(synthetic_dataset, tmp_path_factory) -> tuple[Path, Path,
     result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     commits = json.loads((root / "commits.json").read_text())
-    return out / "checkpoints" / "last" / "pretrained_model", root / "snapshot", commits
+    return last_pretrained(out), root / "snapshot", commits
 
 
 @pytest.fixture

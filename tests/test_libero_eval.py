@@ -18,7 +18,7 @@ from test_conversion import SUITE, convert, run_cli
 
 from lerobot_predvla.frontend import FrontendArtefact, FrozenFrontend
 from lerobot_predvla.frontend.processor_step import OBS_IMAGE_FRESH, FrontendProcessorStep
-from lerobot_predvla.policies.predvla.configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
 BIN = Path(sys.executable).parent
 SOUP = "pick up the alphabet soup and place it in the basket"  # libero_object task 0

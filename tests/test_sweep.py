@@ -13,6 +13,7 @@ import yaml
 from safetensors.torch import save_file
 
 from lerobot_predvla.cli.main import main as predvla_main
+from lerobot_predvla.experiments.eval_info import EvalInfoError, parse_eval_info
 from lerobot_predvla.experiments.report import write_report
 from lerobot_predvla.experiments.sweep import (
     TRAIN_DONE_FILE,
@@ -20,7 +21,6 @@ from lerobot_predvla.experiments.sweep import (
     Runner,
     Sweep,
     SweepError,
-    parse_eval_info,
     parse_shard,
     subprocess_executor,
 )
@@ -194,7 +194,7 @@ def test_parse_eval_info_reads_lerobot_eval_output(tmp_path):
     ], "per_group": {}, "overall": {}}))
     assert parse_eval_info(path) == {"0": {"successes": 0, "episodes": 3}, "1": {"successes": 2, "episodes": 3}}
     path.write_text(json.dumps({"overall": {}}))
-    with pytest.raises(SweepError, match="eval_info.json"):
+    with pytest.raises(EvalInfoError, match="eval_info.json"):
         parse_eval_info(path)
 
 

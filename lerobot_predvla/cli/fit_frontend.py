@@ -5,9 +5,10 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
-from lerobot_predvla.frontend.fitting import DEFAULT_SUITES, FitFrontendConfig, fit_frontend, variance_summary
+from lerobot_predvla.frontend.fitting import FitFrontendConfig, fit_frontend, variance_summary
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import PRECISIONS, VisionWeights, VisionWeightsError
+from lerobot_predvla.libero.protocol import SUITES
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 
 CONFIG_DEFAULTS = {f.name: f.default for f in fields(PredVLAConfig)}
@@ -22,7 +23,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__,
     )
     parser.add_argument("--hdf5-root", type=Path, required=True, help="Directory with <suite>/*_demo.hdf5.")
-    parser.add_argument("--suites", default=",".join(DEFAULT_SUITES), help="Comma-separated suites to pool.")
+    parser.add_argument("--suites", default=",".join(SUITES), help="Comma-separated suites to pool.")
     parser.add_argument(
         "--vision-weights", default="imagenet",
         help="ResNet18 weights: 'imagenet' (paper; needs the torchvision download or cache), a .pth state "

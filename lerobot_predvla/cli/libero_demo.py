@@ -11,7 +11,6 @@ Stages (each is skipped when its output already exists, so a killed run resumes)
 """
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -19,6 +18,10 @@ import time
 from pathlib import Path
 
 from lerobot_predvla.cli.demos import task_ids
+from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, success_rates
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
+from lerobot_predvla.utils.checkpoints import last_pretrained
+from lerobot_predvla.utils.io import atomic_write_json
 
 BANNER = "=" * 78
 BIN = Path(sys.executable).parent
@@ -60,15 +63,6 @@ def _skip(stage: str, path: Path) -> None:
     print(f"\n[{stage}] {path} exists: skipped (delete it to redo this stage)", flush=True)
 
 
-def per_task_success(eval_info: Path) -> dict[int, float]:
-    """Success rate (%) per task id from lerobot-eval's eval_info.json."""
-    info = json.loads(eval_info.read_text())
-    return {
-        entry["task_id"]: 100.0 * sum(entry["metrics"]["successes"]) / len(entry["metrics"]["successes"])
-        for entry in info["per_task"]
-    }
-
-
 def plot_success(results: dict[str, dict[int, float]], suite: str, path: Path) -> None:
     import matplotlib
 
@@ -94,7 +88,7 @@ def plot_success(results: dict[str, dict[int, float]], suite: str, path: Path) -
 def run(args: argparse.Namespace) -> int:
     out: Path = args.out
     hdf5, frontend, dataset, train = out / "hdf5", out / "frontend", out / "dataset", out / "train"
-    checkpoint = train / "checkpoints" / "last" / "pretrained_model"
+    checkpoint = last_pretrained(train)
     predvla = [sys.executable, "-m", "lerobot_predvla.cli.main"]
     tasks = ",".join(map(str, args.tasks))
     if args.vision_weights == "random":
@@ -132,19 +126,19 @@ def run(args: argparse.Namespace) -> int:
     results: dict[str, dict[int, float]] = {}
     for mode, iterations in MODES.items():
         eval_dir = out / f"eval_er{iterations}"
-        info = eval_dir / "eval_info.json"
+        info = eval_dir / EVAL_INFO_FILE
         if info.exists():
             _skip(f"5/6 evaluation ({mode})", info)
         else:
             cap = [] if args.episode_length is None else [f"--env.episode_length={args.episode_length}"]
             _run(f"5/6 evaluation ({mode})", [
                 str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", f"--policy.er_iterations={iterations}",
-                "--policy.device=cpu", "--env.type=predvla_libero", f"--env.task={args.suite}",
+                "--policy.device=cpu", f"--env.type={EVAL_ENV_TYPE}", f"--env.task={args.suite}",
                 f"--env.task_ids=[{tasks}]", f"--eval.n_episodes={args.episodes}",
                 f"--eval.batch_size={min(args.eval_batch_size, args.episodes)}", "--eval.use_async_envs=false",
                 f"--output_dir={eval_dir}", *cap,
             ])
-        results[mode] = per_task_success(info)
+        results[mode] = success_rates(info)
 
     print(f"\n{BANNER}\n6/6 success on {args.suite} ({args.episodes} episodes per task, official init states)")
     print(f"{'task':<8}" + "".join(f"{mode:>20}" for mode in results))
@@ -153,10 +147,8 @@ def run(args: argparse.Namespace) -> int:
     means = {mode: sum(s.values()) / len(s) for mode, s in results.items()}
     print(f"{'mean':<8}" + "".join(f"{means[mode]:>19.1f}%" for mode in results))
     summary = out / "results.json"
-    tmp = summary.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"suite": args.suite, "episodes_per_task": args.episodes,
-                               "per_task": results, "mean": means}, indent=2) + "\n")
-    os.replace(tmp, summary)
+    atomic_write_json(summary, {"suite": args.suite, "episodes_per_task": args.episodes, "per_task": results,
+                                "mean": means})
     plot_success(results, args.suite, out / "success.png")
     print(f"results: {summary}\nplot: {out / 'success.png'}\n{BANNER}")
     return 0

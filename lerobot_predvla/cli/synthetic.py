@@ -15,6 +15,8 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from lerobot_predvla.utils.checkpoints import last_pretrained
+
 BANNER = "=" * 78
 
 
@@ -62,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     dataset_root, train_dir = out / "dataset", out / "train"
     if not dataset_root.exists():
         make_synthetic_dataset(dataset_root, num_tasks=2, episodes_per_task=6)
-    checkpoint = train_dir / "checkpoints" / "last" / "pretrained_model"
+    checkpoint = last_pretrained(train_dir)
     if not checkpoint.exists():
         cmd = [
             str(Path(sys.executable).with_name("lerobot-train")), "--policy.type=predvla",

@@ -16,10 +16,13 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 from tqdm import tqdm
 
 from lerobot_predvla.data.libero_hdf5 import CAMERAS, DemoRef, read_demo, scan_suites
-from lerobot_predvla.frontend.artefact import FRONTEND_META_DIR
 from lerobot_predvla.frontend.frozen import FrozenFrontend
 from lerobot_predvla.frontend.preprocessing import libero_hdf5_to_lerobot
-from lerobot_predvla.policies.predvla.configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.policies.common.cached_features import (
+    FRONTEND_META_DIR,
+    OBS_LANGUAGE_FEATURES,
+    OBS_VISION_FEATURES,
+)
 
 LIBERO_FPS = 20
 IMAGE_STORAGES = ("video", "png")

@@ -30,6 +30,8 @@ from lerobot.envs.configs import EnvConfig, LiberoEnv, _make_vec_env_cls
 from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline, ProcessorStepRegistry
 from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
+
 JOINT_DIM, GRIPPER_DIM = 7, 2
 OBS_ROBOT_STATE = "observation.robot_state"
 
@@ -60,13 +62,13 @@ class PredVLALiberoProcessorStep(ObservationProcessorStep):
         return {**features, PipelineFeatureType.OBSERVATION: observation}
 
 
-@EnvConfig.register_subclass("predvla_libero")
+@EnvConfig.register_subclass(EVAL_ENV_TYPE)
 @dataclass
 class PredVLALiberoEnv(LiberoEnv):
     """LeRobot's LIBERO env config (`--env.task`, `--env.task_ids`, `--env.episode_length`, ...) for PredVLA.
 
     `--env.episode_length=600` is the paper's step cap (Section 4.4); left unset, LeRobot's per-suite caps
-    apply (220/280/300/520 for spatial/object/goal/10).
+    apply (`lerobot_predvla.libero.protocol.STEP_CAPS`: 280/280/300/520 for spatial/object/goal/10).
 
     Args:
         render_interval: Render the cameras every this many control steps (PredVLA's

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_predvla.experiments.sweep import SHORT_SUITES, SUITE_LABELS, SUITES, atomic_write_json
+from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
+from lerobot_predvla.utils.io import atomic_write_json, atomic_write_text
 
 SUMMARY_FILE = "report.json"
 REPORT_FILE = "report.md"
@@ -540,8 +541,6 @@ def write_report(runs_dir: Path, out: Path) -> dict:
     if missing:
         sections += ["", "## Missing runs", "", f"{len(missing)} planned runs have no record:", "",
                      *[f"- `{m}`" for m in missing]]
-    tmp = out / f".{REPORT_FILE}.tmp"
-    tmp.write_text("\n".join(sections) + "\n")
-    os.replace(tmp, out / REPORT_FILE)
+    atomic_write_text(out / REPORT_FILE, "\n".join(sections) + "\n")
     atomic_write_json(out / SUMMARY_FILE, summary)
     return summary

@@ -12,7 +12,6 @@ with `accelerate launch --multi_gpu` (LeRobot's multi-GPU path).
 """
 
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -22,11 +21,13 @@ from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
-SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
-SHORT_SUITES = ("libero_spatial", "libero_goal", "libero_object")  # the paper's column order
-SUITE_LABELS = {"libero_spatial": "spatial", "libero_goal": "goal", "libero_object": "object", "libero_10": "long"}
-PAPER_EPISODES_PER_TASK = 50  # Section 4: rollouts per task, from the official initial states
-PAPER_EPISODE_LENGTH = 600  # Section 4: control-step cap per rollout
+from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from lerobot_predvla.utils.checkpoints import last_pretrained
+from lerobot_predvla.utils.io import atomic_write_json
+from lerobot_predvla.utils.parameters import count_parameters
+from lerobot_predvla.utils.versions import package_versions
+
 PAPER_TRAIN_STEPS = 30_000
 PAPER_BATCH_SIZE = 32
 GROUPS = ("main", "baseline", "ladder", "ablation", "corruption")
@@ -35,7 +36,6 @@ GROUPS = ("main", "baseline", "ladder", "ablation", "corruption")
 CORRUPTION_SOURCE = {"libero_spatial": "libero_goal", "libero_goal": "libero_object",
                      "libero_object": "libero_spatial", "libero_10": "libero_spatial"}
 CORRUPTION_KEYS = {"channel", "alpha", "source_suite", "episode", "open_loop"}
-EVAL_ENV_TYPE = "predvla_libero"  # LeRobot's LIBERO env with PredVLA's proprioception (envs/configs.py)
 TRAIN_DONE_FILE = "predvla_sweep_train.json"  # written beside a finished training's checkpoints
 
 Executor = Callable[[list[str], Path], int]  # (command, log file) -> exit code
@@ -297,13 +297,6 @@ def parse_shard(text: str) -> tuple[int, int]:
     return index, count
 
 
-def atomic_write_json(path: Path, data) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
-
-
 def subprocess_executor(command: list[str], log: Path) -> int:
     """Run a command with stdout and stderr appended to `log`."""
     log.parent.mkdir(parents=True, exist_ok=True)
@@ -314,14 +307,8 @@ def subprocess_executor(command: list[str], log: Path) -> int:
 
 
 def versions() -> dict[str, str]:
-    import importlib.metadata
-
-    found = {"python": sys.version.split()[0]}
-    for dist in ("lerobot", "torch", "lerobot_policy_predvla", "hf-libero"):
-        try:
-            found[dist] = importlib.metadata.version(dist)
-        except importlib.metadata.PackageNotFoundError:
-            found[dist] = "not installed"
+    """Package versions, and the plugin's git commit when it runs from a checkout."""
+    found = package_versions()
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
                                 cwd=Path(__file__).parent, check=False).stdout.strip()
@@ -329,27 +316,6 @@ def versions() -> dict[str, str]:
     except OSError:
         found["lerobot_predvla_git"] = "unknown"
     return found
-
-
-def parse_eval_info(path: Path) -> dict[str, dict[str, int]]:
-    """Per-task successes from lerobot-eval's `eval_info.json`: {task_id: {"successes": s, "episodes": n}}."""
-    try:
-        info = json.loads(path.read_text())
-        tasks = {}
-        for entry in info["per_task"]:
-            successes = [bool(s) for s in entry["metrics"]["successes"]]
-            tasks[str(entry["task_id"])] = {"successes": sum(successes), "episodes": len(successes)}
-    except (OSError, ValueError, KeyError, TypeError) as err:
-        raise SweepError(f"{path}: not a lerobot-eval eval_info.json with per_task successes ({err}).") from err
-    if not tasks:
-        raise SweepError(f"{path}: no per-task results.")
-    return dict(sorted(tasks.items(), key=lambda kv: int(kv[0])))
-
-
-def count_model_parameters(checkpoint: Path) -> int:
-    from lerobot_predvla.hub.publish import count_parameters
-
-    return count_parameters(checkpoint / "model.safetensors")
 
 
 @dataclass
@@ -409,7 +375,7 @@ class Runner:
         ]
 
     def resume_command(self, train_dir: Path) -> list[str]:
-        config = train_dir / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+        config = last_pretrained(train_dir) / "train_config.json"
         return [*self.launcher(), f"--config_path={config}", "--resume=true"]
 
     def eval_command(self, run: Run, checkpoint: Path) -> list[str]:
@@ -476,12 +442,12 @@ class Runner:
             out = self.train_dir(trained, suite, seed)
             if (out / TRAIN_DONE_FILE).is_file():
                 checkpoint = Path(json.loads((out / TRAIN_DONE_FILE).read_text())["checkpoint"])
-            elif (out / "checkpoints" / "last" / "pretrained_model" / "train_config.json").is_file():
+            elif (last_pretrained(out) / "train_config.json").is_file():
                 commands.append(self.resume_command(out))
-                checkpoint = out / "checkpoints" / "last" / "pretrained_model"
+                checkpoint = last_pretrained(out)
             else:
                 commands.append(self.train_command(self.sweep.configs[trained], suite, seed))
-                checkpoint = out / "checkpoints" / "last" / "pretrained_model"
+                checkpoint = last_pretrained(out)
             commands += [self.eval_command(run, checkpoint) for run in pending]
         return commands
 
@@ -517,7 +483,7 @@ class Runner:
         done = out / TRAIN_DONE_FILE
         if done.is_file():
             return json.loads(done.read_text())
-        last = out / "checkpoints" / "last" / "pretrained_model"
+        last = last_pretrained(out)
         if (last / "train_config.json").is_file():
             command, resumed = self.resume_command(out), True
         else:
@@ -532,7 +498,7 @@ class Runner:
         result = {
             "checkpoint": str(last.resolve()),
             "steps": self.sweep.steps_of(spec),
-            "parameters": count_model_parameters(last),
+            "parameters": count_parameters(last / "model.safetensors"),
             "train_wall_s": round(time.monotonic() - start, 1),
             "resumed": resumed,
             "command": command,
@@ -547,12 +513,15 @@ class Runner:
         command = self.eval_command(run, Path(trained["checkpoint"]))
         start = time.monotonic()
         code = self.execute(command, self.log_path(run.config, run.suite, run.seed, "eval"))
-        info = out / "eval_info.json"
+        info = out / EVAL_INFO_FILE
         if code != 0 or not info.is_file():
             print(f"predvla sweep: evaluation {run.key} failed (exit {code}); see "
                   f"{self.log_path(run.config, run.suite, run.seed, 'eval')}", file=sys.stderr)
             return False
-        tasks = parse_eval_info(info)
+        try:
+            tasks = parse_eval_info(info)
+        except EvalInfoError as err:
+            raise SweepError(str(err)) from err
         successes = sum(t["successes"] for t in tasks.values())
         episodes = sum(t["episodes"] for t in tasks.values())
         record = {

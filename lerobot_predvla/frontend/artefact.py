@@ -12,7 +12,6 @@ from lerobot_predvla.frontend.language import LANGUAGE_ENCODER_DIM, LANGUAGE_ENC
 from lerobot_predvla.frontend.pca import PCABasis
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import VISION_ENCODER_DIM, VISION_ENCODER_NAME, VisionWeights
-from lerobot_predvla.policies.predvla.configuration_predvla import FRONTEND_META_DIR  # noqa: F401  (re-exported)
 
 TENSORS_FILE = "frontend.safetensors"
 METADATA_FILE = "frontend.json"

@@ -1,6 +1,5 @@
 """Fitting the front end's PCA bases jointly on LIBERO demonstrations (Section 4.1)."""
 
-import importlib.metadata
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,8 +14,8 @@ from lerobot_predvla.frontend.language import LanguageEncoder
 from lerobot_predvla.frontend.pca import fit_pca
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec, libero_hdf5_to_lerobot, preprocess_images
 from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
-
-DEFAULT_SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+from lerobot_predvla.libero.protocol import SUITES
+from lerobot_predvla.utils.versions import package_versions
 
 
 @dataclass
@@ -38,7 +37,7 @@ class FitFrontendConfig:
 
     hdf5_root: Path
     vision_weights: VisionWeights
-    suites: tuple[str, ...] = DEFAULT_SUITES
+    suites: tuple[str, ...] = SUITES
     language_dim: int = 64
     vision_dim_per_camera: int = 96
     precision: str = "fp32"
@@ -88,10 +87,7 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
             "frame_stride": cfg.frame_stride,
             "num_distinct_instructions": len(set(instructions)),
             "seconds": round(time.perf_counter() - start, 1),
-            "versions": {
-                pkg: importlib.metadata.version(pkg)
-                for pkg in ("torch", "torchvision", "sentence-transformers", "scikit-learn", "lerobot")
-            },
+            "versions": package_versions(("torch", "torchvision", "sentence-transformers", "scikit-learn", "lerobot")),
         },
     )
 

@@ -25,12 +25,16 @@ from string import Template
 
 from huggingface_hub import CommitOperationAdd, HfApi
 from lerobot.configs import PreTrainedConfig
-from safetensors import safe_open
 
-from lerobot_predvla.experiments.sweep import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
-from lerobot_predvla.frontend.artefact import FRONTEND_META_DIR, METADATA_FILE, TENSORS_FILE
+from lerobot_predvla.experiments.report import load_summary
+from lerobot_predvla.frontend.artefact import METADATA_FILE, TENSORS_FILE
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from lerobot_predvla.policies.common.cached_features import FRONTEND_META_DIR
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
+from lerobot_predvla.utils.checkpoints import REQUIRED_FILES, find_pretrained
+from lerobot_predvla.utils.parameters import count_parameters
+from lerobot_predvla.utils.versions import package_version
 
 # Package data of lerobot_predvla.hub (pyproject package-data), read with importlib.resources.
 CARD_TEMPLATE = importlib.resources.files("lerobot_predvla.hub") / "predvla_card.md"
@@ -38,7 +42,6 @@ CARD_FILE = "README.md"
 FRONTEND_DIR = "predvla_frontend"  # the artefact's folder inside a checkpoint and a Hub repo
 PUSH_PATTERNS = ("*.safetensors", "*.json", "*.yaml", "*.md")  # what LeRobot's own push uploads
 NEVER_PUSHED = (POSTERIOR_STORE_FILE,)
-REQUIRED_FILES = ("config.json", "model.safetensors")
 TAGS = ("robotics", "lerobot", "predvla", "predictive-coding", "libero")
 # Frozen encoders (counted once: torchvision resnet18 without `fc`; sentence-transformers all-MiniLM-L6-v2).
 RESNET18_BACKBONE_PARAMS = 11_176_512
@@ -61,10 +64,9 @@ class HubError(ValueError):
 # ----- files ---------------------------------------------------------------------------------------------
 def pretrained_dir(checkpoint: Path) -> Path:
     """The `pretrained_model` directory of a checkpoint (or the directory itself when it holds the weights)."""
-    checkpoint = Path(checkpoint)
-    for candidate in (checkpoint, checkpoint / "pretrained_model"):
-        if all((candidate / name).is_file() for name in REQUIRED_FILES):
-            return candidate
+    found = find_pretrained(checkpoint)
+    if found is not None:
+        return found
     raise HubError(
         f"{checkpoint}: not a checkpoint; expected {' and '.join(REQUIRED_FILES)} in it or in its "
         "pretrained_model/ (e.g. outputs/RUN/checkpoints/last)."
@@ -110,18 +112,6 @@ def frontend_metadata(files: dict[str, Path]) -> dict | None:
     return None
 
 
-def count_parameters(weights: Path) -> int:
-    """Number of values in a safetensors file (read from its header)."""
-    total = 0
-    with safe_open(str(weights), framework="pt") as f:
-        for key in f.keys():
-            n = 1
-            for dim in f.get_slice(key).get_shape():
-                n *= dim
-            total += n
-    return total
-
-
 # ----- model card ------------------------------------------------------------------------------------------
 @dataclass
 class DatasetSummary:
@@ -144,13 +134,6 @@ class DatasetSummary:
         from lerobot.datasets import LeRobotDatasetMetadata
 
         return cls.from_meta(LeRobotDatasetMetadata(repo_id, root=root))
-
-
-def _version(distribution: str) -> str:
-    try:
-        return importlib.metadata.version(distribution)
-    except importlib.metadata.PackageNotFoundError:
-        return "(not installed)"
 
 
 def _format_value(value) -> str:
@@ -244,8 +227,6 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None) ->
 def _results_section(report: Path | None, config_name: str | None) -> str:
     if report is None:
         return "No evaluation results were attached when publishing (`predvla push --results REPORT_DIR`)."
-    from lerobot_predvla.experiments.report import load_summary  # the JSON that `predvla report` writes
-
     summary = load_summary(report)
     names = list(summary["configs"])
     name = config_name or ("predvla" if "predvla" in names else names[0] if len(names) == 1 else None)
@@ -292,8 +273,8 @@ def render_card(
         "er_window": str(config["er_window"]),
         "er_iterations": str(config["er_iterations"]),
         "er_lr": _format_value(config["er_lr"]),
-        "lerobot_version": _version("lerobot"),
-        "plugin_version": _version("lerobot_policy_predvla"),
+        "lerobot_version": package_version("lerobot"),
+        "plugin_version": package_version("lerobot_policy_predvla"),
         "trainable_params": f"{count_parameters(files['model.safetensors']):,}",
         "resnet_params": f"{RESNET18_BACKBONE_PARAMS:,}",
         "minilm_params": f"{MINILM_PARAMS:,}",

@@ -7,25 +7,22 @@ between, in training and at evaluation alike.
 """
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
-from lerobot.configs import PreTrainedConfig
-from lerobot.configs.types import NormalizationMode
-from lerobot.optim.optimizers import AdamConfig
 from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
 
-from lerobot_predvla.policies.predvla.configuration_predvla import (
+from lerobot_predvla.policies.common.cached_features import (
     OBS_LANGUAGE_FEATURES,
     OBS_VISION_FEATURES,
-    cached_feature_normalization,
+    CachedFeaturesConfig,
     use_dataset_frontend,
-    validate_cached_features,
 )
 from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
+from lerobot_predvla.utils.parameters import count_parameters
 
 BASELINE_TRAIN_STEPS = 50_000  # Section 4.4: baselines train for 50,000 steps (PredVLA: 30,000)
 
@@ -41,96 +38,25 @@ def observation_inputs(language: Tensor, vision: Tensor, proprio: Tensor) -> Ten
     return torch.cat([vision, proprio, language.expand(*vision.shape[:-1], -1)], dim=-1)
 
 
-def count_trainable(module: torch.nn.Module) -> int:
-    return sum(p.numel() for p in module.parameters() if p.requires_grad)
-
-
 @dataclass
-class ObservationPolicyConfig(PreTrainedConfig):
-    """Fields shared by the baselines (B1-B4); see the subclasses' docstrings for their own fields.
+class ObservationPolicyConfig(CachedFeaturesConfig):
+    """Fields shared by the baselines (B1-B4); see the subclasses' docstrings for their own fields and
+    `CachedFeaturesConfig` for the dimensions, front end, action head and optimiser fields.
 
-    Args:
-        language_dim: Language representation size after PCA (Table 1: 64).
-        vision_dim_per_camera: Visual PCA components per camera (Table 1: 96).
-        num_cameras: Number of camera views whose features are concatenated (Table 1: 2).
-        proprio_dim: Proprioceptive dimension (Table 1: 9).
-        action_dim: Action dimension (Table 1: 7).
-        visual_refresh_interval: Vision is refreshed every this many control steps and held in between
-            (Table 1: 4).
-        frontend_dir: Front-end artefact that encodes live observations at evaluation, as in PredVLAConfig.
-            None: the training dataset's copy (`meta/predvla_frontend`) when there is one.
-        head_hidden_dim: Hidden width of the two-layer GMM action head (PredVLA's: 256).
-        num_mixtures: Gaussian-mixture components K (Table 1: 5).
-        min_action_scale: Lower bound added to the softplus scales (Table 1: 0.05).
-        sequence_length: Episodes are cut or padded to this many steps in memory (Table 2 short: 200).
-        train_steps: Paper's number of training steps (Section 4.4: 50,000 for the baselines); pass it to
-            lerobot-train's `--steps` (configs/policy/B*.json do).
-        train_batch_size: Paper's batch size (Table 2: 32); lerobot-train's `--batch_size`.
+    Defaults that differ from PredVLA's:
+        train_steps: Section 4.4: 50,000 for the baselines; pass it to lerobot-train's `--steps`
+            (configs/policy/B*.json do).
         optimizer_lr: Adam learning rate, constant. The paper picks it from a four-point sweep per baseline
             (values not given): sweep it with `--policy.optimizer_lr`.
-        optimizer_weight_decay: Adam weight decay (Table 2: 1e-4).
-        grad_clip_norm: Gradient-norm clip (PredVLA's 1.0).
     """
 
-    language_dim: int = 64
-    vision_dim_per_camera: int = 96
-    num_cameras: int = 2
-    proprio_dim: int = 9
-    action_dim: int = 7
-    visual_refresh_interval: int = 4
-    frontend_dir: str | None = None
-    head_hidden_dim: int = 256
-    num_mixtures: int = 5
-    min_action_scale: float = 0.05
-    sequence_length: int = 200
     train_steps: int = BASELINE_TRAIN_STEPS
-    train_batch_size: int = 32
     optimizer_lr: float = 1e-4
-    optimizer_weight_decay: float = 1e-4
-    grad_clip_norm: float = 1.0
-
-    # Same normalisation as PredVLA: identity features, actions min-max scaled to [-1, 1].
-    normalization_mapping: dict[str, NormalizationMode] = field(default_factory=cached_feature_normalization)
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.visual_refresh_interval < 1 or self.sequence_length < 1:
-            raise ValueError(
-                f"`visual_refresh_interval` and `sequence_length` must be >= 1, got {self.visual_refresh_interval}"
-                f" and {self.sequence_length}."
-            )
-
-    @property
-    def vision_dim(self) -> int:
-        return self.vision_dim_per_camera * self.num_cameras
 
     @property
     def observation_dim(self) -> int:
         """Input size per step: held vision, proprioception and language (192 + 9 + 64 = 265)."""
         return self.vision_dim + self.proprio_dim + self.language_dim
-
-    def get_optimizer_preset(self) -> AdamConfig:
-        return AdamConfig(
-            lr=self.optimizer_lr, weight_decay=self.optimizer_weight_decay, grad_clip_norm=self.grad_clip_norm
-        )
-
-    def get_scheduler_preset(self) -> None:
-        return None  # constant learning rate, as PredVLA (Table 2)
-
-    def validate_features(self) -> None:
-        validate_cached_features(self, type(self).__name__.removesuffix("Config"))
-
-    @property
-    def observation_delta_indices(self) -> None:
-        return None  # whole episodes come from the in-memory EpisodeSequences
-
-    @property
-    def action_delta_indices(self) -> None:
-        return None
-
-    @property
-    def reward_delta_indices(self) -> None:
-        return None
 
 
 class ObservationPolicy(PreTrainedPolicy):
@@ -155,7 +81,7 @@ class ObservationPolicy(PreTrainedPolicy):
 
     def log_parameter_count(self) -> None:
         """Start-up line: our trainable parameters beside the paper's (Tables 4 and 5)."""
-        ours = count_trainable(self)
+        ours = count_parameters(self)
         paper = "" if self.paper_parameters is None else (
             f" (paper: {self.paper_parameters:,}, {100 * (ours - self.paper_parameters) / self.paper_parameters:+.2f}%)"
         )

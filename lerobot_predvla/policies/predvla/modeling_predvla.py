@@ -9,12 +9,12 @@ from lerobot.utils.constants import OBS_STATE
 from safetensors.torch import load_file
 from torch import Tensor
 
-from lerobot_predvla.policies.predvla.configuration_predvla import (
+from lerobot_predvla.policies.common.cached_features import (
     OBS_LANGUAGE_FEATURES,
     OBS_VISION_FEATURES,
-    PredVLAConfig,
     use_dataset_frontend,
 )
+from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.corruption import ObservationCorruption
 from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore

@@ -1,25 +1,17 @@
-"""Pre- and post-processing pipelines of the PredVLA policy."""
+"""Pre- and post-processing pipelines of PredVLA, shared by every policy type of the plugin (same inputs)."""
 
 from typing import Any
 
 import torch
-from lerobot.processor import (
-    AddBatchDimensionProcessorStep,
-    DeviceProcessorStep,
-    NormalizerProcessorStep,
-    PolicyAction,
-    PolicyProcessorPipeline,
-    RenameObservationsProcessorStep,
-    UnnormalizerProcessorStep,
-)
-from lerobot.processor.factory import make_policy_processor_pipelines
+from lerobot.processor import PolicyAction, PolicyProcessorPipeline
+from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
 
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
-from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
 
 
-def frontend_step(config: PredVLAConfig) -> FrontendProcessorStep:
+def frontend_step(config: CachedFeaturesConfig) -> FrontendProcessorStep:
     """The frozen front end of `config.frontend_dir`, or a pass-through step for cached features only."""
     if config.frontend_dir is None:
         return FrontendProcessorStep()
@@ -31,7 +23,7 @@ def frontend_step(config: PredVLAConfig) -> FrontendProcessorStep:
 
 
 def make_predvla_pre_post_processors(
-    config: PredVLAConfig,
+    config: CachedFeaturesConfig,
     dataset_stats: dict[str, dict[str, torch.Tensor]] | None = None,
 ) -> tuple[
     PolicyProcessorPipeline[dict[str, Any], dict[str, Any]],
@@ -39,27 +31,16 @@ def make_predvla_pre_post_processors(
 ]:
     """Input: rename -> batch dim -> front end -> device -> normalise. Output: unnormalise -> cpu.
 
+    LeRobot's default steps (`make_default_policy_processor_steps`) with the front end inserted before the
+    device step.
     The front-end step turns live environment observations into the cached features (training batches
     already have them) and carries the artefact of `config.frontend_dir` into the checkpoint. The inputs
     are the cached front-end features: PCA outputs and raw proprioception pass through
     unchanged (identity, Section 3.1); actions are min-max scaled to the [-1, 1] range of the tanh
     component means and scaled back on the way out.
     """
-    input_steps = [
-        RenameObservationsProcessorStep(rename_map={}),
-        AddBatchDimensionProcessorStep(),
-        frontend_step(config),
-        DeviceProcessorStep(device=config.device),
-        NormalizerProcessorStep(
-            features={**config.input_features, **config.output_features},
-            norm_map=config.normalization_mapping,
-            stats=dataset_stats,
-        ),
-    ]
-    output_steps = [
-        UnnormalizerProcessorStep(
-            features=config.output_features, norm_map=config.normalization_mapping, stats=dataset_stats
-        ),
-        DeviceProcessorStep(device="cpu"),
-    ]
-    return make_policy_processor_pipelines(input_steps=input_steps, output_steps=output_steps)
+    s = make_default_policy_processor_steps(config, dataset_stats)
+    return make_policy_processor_pipelines(
+        input_steps=[s.rename_observations, s.add_batch_dim, frontend_step(config), s.to_device, s.normalize],
+        output_steps=[s.unnormalize, s.to_cpu],
+    )

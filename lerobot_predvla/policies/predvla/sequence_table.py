@@ -20,11 +20,8 @@ from lerobot.processor.converters import batch_to_transition, transition_to_batc
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor
 
-from lerobot_predvla.policies.predvla.configuration_predvla import (
-    OBS_LANGUAGE_FEATURES,
-    OBS_VISION_FEATURES,
-    PredVLAConfig,
-)
+from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 
 SEQUENCE_COLUMNS = (OBS_VISION_FEATURES, OBS_STATE, ACTION)
 
