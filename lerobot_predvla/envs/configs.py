@@ -31,6 +31,7 @@ from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline,
 from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
+from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
 
 JOINT_DIM, GRIPPER_DIM = 7, 2
 OBS_ROBOT_STATE = "observation.robot_state"
@@ -113,10 +114,7 @@ _lerobot_make_env_pre_post_processors = lerobot.envs.factory.make_env_pre_post_p
 
 def make_env_pre_post_processors(env_cfg: EnvConfig, policy_cfg) -> tuple:
     """LeRobot's `make_env_pre_post_processors`, with PredVLA's LIBERO step for this plugin's policies."""
-    from lerobot_predvla.policies.common.observation_policy import ObservationPolicyConfig
-    from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
-
-    if type(env_cfg) is LiberoEnv and isinstance(policy_cfg, PredVLAConfig | ObservationPolicyConfig):
+    if type(env_cfg) is LiberoEnv and isinstance(policy_cfg, CachedFeaturesConfig):
         return libero_env_processors()
     return _lerobot_make_env_pre_post_processors(env_cfg, policy_cfg)
 
