@@ -6,6 +6,7 @@ only registration point (`lerobot_policy_predvla`, the name LeRobot's plugin loa
 """
 
 from lerobot_predvla.envs.configs import PredVLALiberoEnv
+from lerobot_predvla.policies import POLICY_TYPES
 from lerobot_predvla.policies.bc_rnn.configuration_predvla_bc_rnn import PredVLABCRNNConfig
 from lerobot_predvla.policies.bc_rnn.modeling_predvla_bc_rnn import PredVLABCRNNPolicy
 from lerobot_predvla.policies.bc_transformer.configuration_predvla_bc_transformer import PredVLABCTransformerConfig
@@ -15,9 +16,6 @@ from lerobot_predvla.policies.ladder.modeling_predvla_ladder import PredVLALadde
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
 from lerobot_predvla.policies.predvla.processor_predvla import make_predvla_pre_post_processors
-
-# `--policy.type` of every policy of the plugin, in the order the paper introduces them.
-POLICY_TYPES = ("predvla", "predvla_bc_transformer", "predvla_bc_rnn", "predvla_ladder")
 
 __all__ = [
     "POLICY_TYPES",

@@ -202,3 +202,11 @@ def test_lerobot_train_cli_runs_a_baseline_config(synthetic_dataset, tmp_path):
     assert result.returncode == 0, log[-3000:]
     assert "predvla_bc_rnn: 675,595 trainable parameters (paper: 674,276" in log and "action_nll" in log
     assert (tmp_path / "run" / "checkpoints" / "000002" / "pretrained_model" / "model.safetensors").is_file()
+    # A saved BC-RNN checkpoint publishes with its own card (it used to fail on PredVLA's `tau`).
+    push = subprocess.run(
+        [str(Path(sys.executable).with_name("predvla")), "push", str(tmp_path / "run" / "checkpoints" / "last"),
+         "someone/bc", "--dry-run"],
+        capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"},
+    )
+    assert push.returncode == 0, push.stderr
+    assert "README.md" in push.stdout and "train_config.json" in push.stdout

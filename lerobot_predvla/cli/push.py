@@ -1,4 +1,4 @@
-"""`predvla push`: publish a saved PredVLA checkpoint on the Hugging Face Hub with its model card."""
+"""`predvla push`: publish a saved checkpoint of any policy type of the plugin on the Hugging Face Hub with its card."""
 
 import argparse
 import sys

@@ -29,8 +29,9 @@ from lerobot.configs import PreTrainedConfig
 from lerobot_predvla.experiments.report import load_summary
 from lerobot_predvla.frontend.artefact import METADATA_FILE, TENSORS_FILE
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from lerobot_predvla.policies import POLICY_TYPES
 from lerobot_predvla.policies.common.cached_features import FRONTEND_META_DIR
-from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PREDICTIVE_RUNGS
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 from lerobot_predvla.utils.checkpoints import REQUIRED_FILES, find_pretrained
 from lerobot_predvla.utils.parameters import count_parameters
@@ -42,7 +43,8 @@ CARD_FILE = "README.md"
 FRONTEND_DIR = "predvla_frontend"  # the artefact's folder inside a checkpoint and a Hub repo
 PUSH_PATTERNS = ("*.safetensors", "*.json", "*.yaml", "*.md")  # what LeRobot's own push uploads
 NEVER_PUSHED = (POSTERIOR_STORE_FILE,)
-TAGS = ("robotics", "lerobot", "predvla", "predictive-coding", "libero")
+TAGS = ("robotics", "lerobot", "predvla", "libero")
+PREDICTIVE_TAG = "predictive-coding"  # PredVLA and the ladder rungs that keep its predictive network
 # Frozen encoders (counted once: torchvision resnet18 without `fc`; sentence-transformers all-MiniLM-L6-v2).
 RESNET18_BACKBONE_PARAMS = 11_176_512
 MINILM_PARAMS = 22_713_216
@@ -249,6 +251,75 @@ def _results_section(report: Path | None, config_name: str | None) -> str:
     return "\n".join(lines)
 
 
+def _policy_type(config: dict, where: Path) -> str:
+    """The checkpoint's policy type, which must be one of this plugin's (else one clear line)."""
+    policy_type = config.get("type")
+    if policy_type not in POLICY_TYPES:
+        raise HubError(
+            f"{where}: policy type {policy_type!r} is not one of this plugin's ({', '.join(POLICY_TYPES)}); "
+            "publish it with LeRobot's own push_to_hub."
+        )
+    return policy_type
+
+
+def _model_section(config: dict) -> dict[str, str]:
+    """Title, description and the type-specific lines of the card, for each policy type of the plugin."""
+    policy_type = config["type"]
+    config_cls = PreTrainedConfig.get_choice_class(policy_type)
+    values = {
+        "policy_type": policy_type,
+        "policy_class": config_cls.__name__.removesuffix("Config") + "Policy",
+        "posterior_note": "",
+        "er_limitation": "",
+    }
+    shared = (
+        "It reads the cached features of PredVLA's frozen front end and decodes a Gaussian-mixture action with "
+        "PredVLA's head, trained on the same data."
+    )
+    if policy_type == "predvla":
+        values["model_title"] = "PredVLA"
+        values["model_description"] = (
+            "PredVLA is a language-conditioned **predictive-coding** policy for robot manipulation (paper: *PredVLA: "
+            "Predictive Sensorimotor Modeling for Sub-Million-Parameter Robot Manipulation*). A hierarchical recurrent "
+            "network of four modules (task T, vision V, upper and lower action A) with time constants "
+            f"{_format_value(config['tau'])} predicts visual features and proprioception and outputs a "
+            "Gaussian-mixture action. Observations never enter the network as inputs: at every control step, *error "
+            f"regression* adjusts the latent posteriors of the last {config['er_window']} steps by "
+            f"{config['er_iterations']} Adam iterations (step {_format_value(config['er_lr'])}) to minimise the free "
+            "energy of the prediction errors, and the action is decoded from the corrected state. Language "
+            "conditions the top module."
+        )
+        values["posterior_note"] = (
+            "Training posteriors (one latent per demonstration, step and module) are optimised during training only "
+            "and are not part of this repository."
+        )
+        values["er_limitation"] = (
+            f"- Error regression runs {config['er_iterations']} optimiser iterations per control step; its cost "
+            f"grows with the window ({config['er_window']} steps).\n"
+        )
+    elif policy_type == "predvla_ladder":
+        values["model_title"] = f"PredVLA ladder rung {config['rung']}"
+        values["model_description"] = (
+            f"Rung {config['rung']} of the paper's mechanism ladder from PredVLA to BC-RNN (Section 4.5): PredVLA with "
+            "part of its mechanism removed (no free variables or error regression from L2 on; observations as "
+            f"inputs from L3; no temporal hierarchy from L4; LSTM cells at L5). {shared}"
+        )
+    elif policy_type == "predvla_bc_rnn":
+        values["model_title"] = "BC-RNN baseline"
+        values["model_description"] = (
+            "The paper's BC-RNN baseline (B2): an LSTM over held visual features, proprioception and the instruction "
+            f"embedding, trained by behaviour cloning. {shared}"
+        )
+    else:
+        values["model_title"] = f"BC-Transformer baseline (chunk {config['chunk_size']})"
+        values["model_description"] = (
+            "The paper's BC-Transformer baseline (B1, B3, B4 by action chunk size): a causal Transformer over a window "
+            f"of held visual features, proprioception and the instruction embedding, trained by behaviour cloning. "
+            f"{shared}"
+        )
+    return values
+
+
 def render_card(
     files: dict[str, Path],
     repo_id: str,
@@ -261,18 +332,19 @@ def render_card(
     train_cfg = json.loads(files["train_config.json"].read_text()) if "train_config.json" in files else None
     dataset_repo_id = dataset.repo_id if dataset else (train_cfg["dataset"]["repo_id"] if train_cfg else "unknown")
     frontend_section, pca_values = _frontend_section(frontend_metadata(files))
-    own_fields = [f.name for f in dataclasses.fields(PredVLAConfig) if f.name not in {
-        g.name for g in dataclasses.fields(PreTrainedConfig)}]
+    _policy_type(config, files["config.json"])
+    model = _model_section(config)
+    lerobot_fields = {f.name for f in dataclasses.fields(PreTrainedConfig)}
+    config_cls = PreTrainedConfig.get_choice_class(config["type"])
+    own_fields = [f.name for f in dataclasses.fields(config_cls) if f.name not in lerobot_fields]
     features = {**config.get("input_features", {}), **config.get("output_features", {})}
+    is_predictive = config["type"] == "predvla" or config.get("rung") in PREDICTIVE_RUNGS
     values = {
         "license": config.get("license") or "apache-2.0",
         "dataset_repo_id": dataset_repo_id,
-        "tags_yaml": "\n".join(f"- {tag}" for tag in TAGS),
+        "tags_yaml": "\n".join(f"- {tag}" for tag in (*TAGS, *([PREDICTIVE_TAG] * is_predictive))),
         "repo_id": repo_id,
-        "tau": _format_value(config["tau"]),
-        "er_window": str(config["er_window"]),
-        "er_iterations": str(config["er_iterations"]),
-        "er_lr": _format_value(config["er_lr"]),
+        **model,
         "lerobot_version": package_version("lerobot"),
         "plugin_version": package_version("lerobot_policy_predvla"),
         "trainable_params": f"{count_parameters(files['model.safetensors']):,}",
@@ -346,6 +418,7 @@ def push_checkpoint(
 ) -> tuple[dict[str, Path | bytes], str | None]:
     """Publish a saved checkpoint with its card in one commit. Returns the files and the commit URL."""
     files, dataset_root = collect_checkpoint(checkpoint, frontend)
+    _policy_type(json.loads(files["config.json"].read_text()), files["config.json"])
     dataset = None
     if dataset_root is not None and "train_config.json" in files:
         repo = json.loads(files["train_config.json"].read_text())["dataset"]["repo_id"]
