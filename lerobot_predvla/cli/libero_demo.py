@@ -1,4 +1,4 @@
-"""`predvla libero-demo`: the main job end to end on the LIBERO simulator, offline, on CPU.
+"""`predvla libero-demo`: the main job end to end on the LIBERO simulator, offline (CPU by default).
 
 Stages (each is skipped when its output already exists, so a killed run resumes):
 1. scripted-expert demonstrations (`predvla demos`),
@@ -46,6 +46,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--episodes", type=int, default=10, help="evaluation episodes per task and mode")
     p.add_argument("--eval-batch-size", type=int, default=10, help="parallel environments during evaluation")
     p.add_argument("--episode-length", type=int, default=None, help="step cap (paper: 600; default: suite cap)")
+    p.add_argument("--device", default="cpu",
+                   help="torch device for lerobot-train and lerobot-eval (--policy.device), e.g. cuda; default cpu")
     p.set_defaults(func=run)
 
 
@@ -118,8 +120,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         _run("4/6 training", [
             str(BIN / "lerobot-train"), "--policy.type=predvla", "--dataset.repo_id=local/predvla_libero_demo",
-            f"--dataset.root={dataset}", "--policy.push_to_hub=false", "--policy.device=cpu", "--num_workers=0",
-            "--wandb.enable=false", f"--steps={args.steps}", f"--batch_size={args.batch_size}",
+            f"--dataset.root={dataset}", "--policy.push_to_hub=false", f"--policy.device={args.device}",
+            "--num_workers=0", "--wandb.enable=false", f"--steps={args.steps}", f"--batch_size={args.batch_size}",
             f"--save_freq={args.steps}", "--log_freq=50", f"--policy.optimizer_lr={args.lr}",
             f"--output_dir={train}",
         ])
@@ -133,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
             cap = [] if args.episode_length is None else [f"--env.episode_length={args.episode_length}"]
             _run(f"5/6 evaluation ({mode})", [
                 str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", f"--policy.er_iterations={iterations}",
-                "--policy.device=cpu", f"--env.type={EVAL_ENV_TYPE}", f"--env.task={args.suite}",
+                f"--policy.device={args.device}", f"--env.type={EVAL_ENV_TYPE}", f"--env.task={args.suite}",
                 f"--env.task_ids=[{tasks}]", f"--eval.n_episodes={args.episodes}",
                 f"--eval.batch_size={min(args.eval_batch_size, args.episodes)}", "--eval.use_async_envs=false",
                 f"--output_dir={eval_dir}", *cap,

@@ -26,10 +26,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=int, default=300, help="lerobot-train steps")
     p.add_argument("--batch-size", type=int, default=8)
     p.add_argument("--episodes", type=int, default=2, help="episodes replayed per mode")
+    p.add_argument("--device", default="cpu", help="torch device for training and replay, e.g. cuda; default cpu")
     p.set_defaults(func=run)
 
 
-def replay(checkpoint: Path, dataset_root: Path, episodes: int, er_iterations: int) -> tuple[float, list]:
+def replay(
+    checkpoint: Path, dataset_root: Path, episodes: int, er_iterations: int, device: str
+) -> tuple[float, list]:
     """Mean squared action error over replayed episodes and the first episode's actions."""
     from lerobot.datasets import LeRobotDataset
     from lerobot.policies.factory import make_pre_post_processors
@@ -37,9 +40,11 @@ def replay(checkpoint: Path, dataset_root: Path, episodes: int, er_iterations: i
     from lerobot_predvla import PredVLAConfig, PredVLAPolicy
 
     config = PredVLAConfig.from_pretrained(checkpoint)
-    config.er_iterations = er_iterations
+    config.er_iterations, config.device = er_iterations, device
     policy = PredVLAPolicy.from_pretrained(checkpoint, config=config)
-    pre, post = make_pre_post_processors(config, pretrained_path=str(checkpoint))
+    pre, post = make_pre_post_processors(
+        config, pretrained_path=str(checkpoint), preprocessor_overrides={"device_processor": {"device": device}}
+    )
     dataset = LeRobotDataset("local/predvla_synthetic", root=dataset_root)
     errors, first = [], []
     bounds = dataset.meta.episodes
@@ -50,7 +55,7 @@ def replay(checkpoint: Path, dataset_root: Path, episodes: int, er_iterations: i
             frame = dataset[i]
             with torch.inference_mode():
                 action = post(policy.select_action(pre(dict(frame))))[0]
-            errors.append(((action - frame["action"]) ** 2).mean().item())
+            errors.append(((action - frame["action"]) ** 2).mean().item())  # both on the CPU (postprocessor)
             if ep == 0:
                 first.append((action[0].item(), frame["action"][0].item()))
     return sum(errors) / len(errors), first
@@ -69,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         cmd = [
             str(Path(sys.executable).with_name("lerobot-train")), "--policy.type=predvla",
             "--dataset.repo_id=local/predvla_synthetic", f"--dataset.root={dataset_root}",
-            "--policy.push_to_hub=false", "--policy.device=cpu", "--num_workers=0", "--wandb.enable=false",
+            "--policy.push_to_hub=false", f"--policy.device={args.device}", "--num_workers=0", "--wandb.enable=false",
             f"--steps={args.steps}", f"--batch_size={args.batch_size}", f"--save_freq={args.steps}",
             "--log_freq=25", "--policy.sequence_length=64", "--policy.optimizer_lr=1e-3", f"--output_dir={train_dir}",
         ]
@@ -77,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         subprocess.run(cmd, check=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
     results = {}
     for iterations in (10, 0):
-        mse, first = replay(checkpoint, dataset_root, args.episodes, iterations)
+        mse, first = replay(checkpoint, dataset_root, args.episodes, iterations, args.device)
         results[iterations] = {"action_mse": mse, "first_episode": first}
     print(f"\n{'mode':<34}{'action MSE vs demonstrations':>30}")
     print(f"{'error regression (10 iterations)':<34}{results[10]['action_mse']:>30.5f}")
