@@ -189,6 +189,7 @@ def test_corruption_reaches_error_regression_on_one_channel(channel, alpha, synt
         PredVLAConfig(er_corruption_channel="vision", er_corruption_alpha=0.5)
 
 
+@pytest.mark.slow
 def test_lerobot_train_cli_runs_a_baseline_config(synthetic_dataset, tmp_path):
     """`lerobot-train --config_path configs/policy/B2.json` finds the plugin's type and trains."""
     cmd = [

@@ -10,6 +10,8 @@ import h5py
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.simulator
+
 SUITE, TASK_ID, SEED = "libero_object", 0, 7
 
 

@@ -20,6 +20,8 @@ from lerobot_predvla.frontend import FrontendArtefact, FrozenFrontend
 from lerobot_predvla.frontend.processor_step import OBS_IMAGE_FRESH, FrontendProcessorStep
 from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
+pytestmark = pytest.mark.simulator
+
 BIN = Path(sys.executable).parent
 SOUP = "pick up the alphabet soup and place it in the basket"  # libero_object task 0
 EPISODE_STEPS = 9

@@ -198,6 +198,7 @@ def test_parse_eval_info_reads_lerobot_eval_output(tmp_path):
         parse_eval_info(path)
 
 
+@pytest.mark.slow
 def test_real_lerobot_train_through_the_runner(synthetic_dataset, tmp_path):
     """The runner's lerobot-train command works as generated (evaluation faked: no LIBERO in tests)."""
     dataset = {"repo_id": "local/predvla_synthetic", "root": str(synthetic_dataset)}
@@ -246,6 +247,7 @@ def _ddp_worker(rank: int, world: int, init_file: str, dataset_root: str, out: s
     dist.destroy_process_group()
 
 
+@pytest.mark.slow
 def test_posterior_store_stays_consistent_under_ddp(synthetic_dataset, tmp_path):
     """Two processes, different episodes: gradients of the store are all-reduced like any parameter, so both
     replicas take the same Adam step, equal to one process seeing both batches with the averaged loss."""
