@@ -181,3 +181,14 @@ def test_published_files_reproduce_actions_front_end_included(checkpoint, tmp_pa
         with torch.inference_mode():
             actions.append(torch.cat([post(policy.select_action(pre(dict(o)))) for o in observations]))
     torch.testing.assert_close(actions[0], actions[1], rtol=0, atol=0)
+
+
+def test_step_caps_are_lerobots():
+    """The per-suite caps `predvla demos` and the docs use are the ones lerobot-eval applies."""
+    from lerobot.envs.libero import TASK_SUITE_MAX_STEPS
+
+    from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+    from lerobot_predvla.libero.protocol import STEP_CAPS, SUITES
+
+    assert set(STEP_CAPS) == set(SUITES)
+    assert {suite: TASK_SUITE_MAX_STEPS[suite] for suite in SUITES} == STEP_CAPS
