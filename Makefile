@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install sysdeps test lint demo synthetic-demo libero
+.PHONY: install sysdeps test test-fast lint demo synthetic-demo libero
 
 $(PY):
 	PYENV_VERSION=3.12.1 python3.12 -m venv $(VENV) || python3.12 -m venv $(VENV)
@@ -21,8 +21,13 @@ sysdeps:
 
 install: $(STAMP) sysdeps
 
+# The whole suite, simulator included (what CI runs).
 test: install libero
 	$(PY) -m pytest -q tests
+
+# Without the simulator and without subprocess training: under 2 minutes on 2 idle cores.
+test-fast: install
+	$(PY) -m pytest -q -m "not simulator and not slow" tests
 
 lint: install
 	$(VENV)/bin/ruff check lerobot_predvla lerobot_policy_predvla tests benchmarks

@@ -18,11 +18,11 @@ import torch
 from torch import Tensor, nn
 from torch.utils._python_dispatch import TorchDispatchMode
 
-from benchmarks.reference import reference_rollout
-from lerobot_predvla.configuration_predvla import PredVLAConfig
-from lerobot_predvla.error_regression import ErrorRegression
-from lerobot_predvla.modeling_predvla import masked_mean, training_complexity
-from lerobot_predvla.predictive_model import PredictiveModel
+from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
+from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean, training_complexity
+from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
+from lerobot_predvla.policies.predvla.reference import reference_rollout
 
 MATMULS = {torch.ops.aten.mm.default, torch.ops.aten.addmm.default, torch.ops.aten.bmm.default,
            torch.ops.aten.mm.out, torch.ops.aten.addmm.out}

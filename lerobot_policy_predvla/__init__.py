@@ -1,19 +1,9 @@
-"""Discovery name for LeRobot's plugin loader: importing it registers the PredVLA policy types.
+"""Discovery name for LeRobot's plugin loader (`register_third_party_plugins` imports `lerobot_policy_*`).
 
-`predvla` (the paper's model and its ablations A1-A6), `predvla_bc_transformer` and `predvla_bc_rnn` (baselines
-B1-B4) and `predvla_ladder` (ladder rungs L2-L5, L2b).
+It only re-exports `lerobot_predvla`, whose import registers every policy type and the `predvla_libero` env.
 """
 
-from lerobot_predvla import PredVLAConfig, PredVLAPolicy, make_predvla_pre_post_processors
-from lerobot_predvla.configuration_predvla_bc_rnn import PredVLABCRNNConfig
-from lerobot_predvla.configuration_predvla_bc_transformer import PredVLABCTransformerConfig
-from lerobot_predvla.configuration_predvla_ladder import PredVLALadderConfig
+import lerobot_predvla
+from lerobot_predvla import *  # noqa: F403
 
-__all__ = [
-    "PredVLABCRNNConfig",
-    "PredVLABCTransformerConfig",
-    "PredVLAConfig",
-    "PredVLALadderConfig",
-    "PredVLAPolicy",
-    "make_predvla_pre_post_processors",
-]
+__all__ = lerobot_predvla.__all__

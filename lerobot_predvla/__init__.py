@@ -1,8 +1,32 @@
-"""PredVLA: a sub-million-parameter predictive-coding policy, as a LeRobot policy plugin."""
+"""PredVLA: a sub-million-parameter predictive-coding policy, as a LeRobot policy plugin.
 
-from .configuration_predvla import PredVLAConfig
-from .libero.eval_config import PredVLALiberoEnv  # registers --env.type=predvla_libero
-from .modeling_predvla import PredVLAPolicy
-from .processor_predvla import make_predvla_pre_post_processors
+Importing this package registers every policy type of the plugin with LeRobot (`--policy.type=predvla`,
+`predvla_bc_transformer`, `predvla_bc_rnn`, `predvla_ladder`) and the `--env.type=predvla_libero` env; it is the
+only registration point (`lerobot_policy_predvla`, the name LeRobot's plugin loader imports, re-exports it).
+"""
 
-__all__ = ["PredVLAConfig", "PredVLALiberoEnv", "PredVLAPolicy", "make_predvla_pre_post_processors"]
+from lerobot_predvla.envs.configs import PredVLALiberoEnv
+from lerobot_predvla.policies import POLICY_TYPES
+from lerobot_predvla.policies.bc_rnn.configuration_predvla_bc_rnn import PredVLABCRNNConfig
+from lerobot_predvla.policies.bc_rnn.modeling_predvla_bc_rnn import PredVLABCRNNPolicy
+from lerobot_predvla.policies.bc_transformer.configuration_predvla_bc_transformer import PredVLABCTransformerConfig
+from lerobot_predvla.policies.bc_transformer.modeling_predvla_bc_transformer import PredVLABCTransformerPolicy
+from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PredVLALadderConfig
+from lerobot_predvla.policies.ladder.modeling_predvla_ladder import PredVLALadderPolicy
+from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
+from lerobot_predvla.policies.predvla.processor_predvla import make_predvla_pre_post_processors
+
+__all__ = [
+    "POLICY_TYPES",
+    "PredVLABCRNNConfig",
+    "PredVLABCRNNPolicy",
+    "PredVLABCTransformerConfig",
+    "PredVLABCTransformerPolicy",
+    "PredVLAConfig",
+    "PredVLALadderConfig",
+    "PredVLALadderPolicy",
+    "PredVLALiberoEnv",
+    "PredVLAPolicy",
+    "make_predvla_pre_post_processors",
+]

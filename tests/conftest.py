@@ -7,7 +7,7 @@ import pytest
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from lerobot_predvla.synthetic import make_synthetic_dataset  # noqa: E402
+from lerobot_predvla.data.synthetic import make_synthetic_dataset  # noqa: E402
 
 
 @pytest.fixture(scope="session")

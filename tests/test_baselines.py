@@ -16,12 +16,15 @@ from test_policy import observation
 
 import lerobot_policy_predvla  # noqa: F401  (registers the policy types, as LeRobot's plugin loader does)
 from lerobot_predvla import PredVLAConfig, PredVLAPolicy
-from lerobot_predvla.configuration_predvla_ladder import PredVLALadderConfig
-from lerobot_predvla.corruption import replaced
-from lerobot_predvla.modeling_predvla_bc_transformer import PredVLABCTransformerConfig, PredVLABCTransformerPolicy
-from lerobot_predvla.modeling_predvla_ladder import PredVLALadderPolicy
-from lerobot_predvla.observation_policy import count_trainable
-from lerobot_predvla.sequence_table import read_columns
+from lerobot_predvla.policies.bc_transformer.modeling_predvla_bc_transformer import (
+    PredVLABCTransformerConfig,
+    PredVLABCTransformerPolicy,
+)
+from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PredVLALadderConfig
+from lerobot_predvla.policies.ladder.modeling_predvla_ladder import PredVLALadderPolicy
+from lerobot_predvla.policies.predvla.corruption import replaced
+from lerobot_predvla.policies.predvla.sequence_table import read_columns
+from lerobot_predvla.utils.parameters import count_parameters
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "policy"
 PREDVLA = 675_732
@@ -59,7 +62,7 @@ def test_every_table_row_has_a_config():
 def test_parameter_count_matches_the_paper(name):
     config = preset(name)
     policy = get_policy_class(config.type)(config)
-    ours, (paper, exact) = count_trainable(policy), PAPER_PARAMETERS[name]
+    ours, (paper, exact) = count_parameters(policy), PAPER_PARAMETERS[name]
     if exact:
         assert ours == paper
     else:
@@ -186,6 +189,7 @@ def test_corruption_reaches_error_regression_on_one_channel(channel, alpha, synt
         PredVLAConfig(er_corruption_channel="vision", er_corruption_alpha=0.5)
 
 
+@pytest.mark.slow
 def test_lerobot_train_cli_runs_a_baseline_config(synthetic_dataset, tmp_path):
     """`lerobot-train --config_path configs/policy/B2.json` finds the plugin's type and trains."""
     cmd = [
@@ -199,3 +203,11 @@ def test_lerobot_train_cli_runs_a_baseline_config(synthetic_dataset, tmp_path):
     assert result.returncode == 0, log[-3000:]
     assert "predvla_bc_rnn: 675,595 trainable parameters (paper: 674,276" in log and "action_nll" in log
     assert (tmp_path / "run" / "checkpoints" / "000002" / "pretrained_model" / "model.safetensors").is_file()
+    # A saved BC-RNN checkpoint publishes with its own card (it used to fail on PredVLA's `tau`).
+    push = subprocess.run(
+        [str(Path(sys.executable).with_name("predvla")), "push", str(tmp_path / "run" / "checkpoints" / "last"),
+         "someone/bc", "--dry-run"],
+        capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"},
+    )
+    assert push.returncode == 0, push.stderr
+    assert "README.md" in push.stdout and "train_config.json" in push.stdout

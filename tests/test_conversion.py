@@ -13,13 +13,13 @@ from lerobot.envs.utils import preprocess_observation
 from lerobot.processor.env_processor import LiberoProcessorStep
 from libero_factory import RAW_TOP_ROWS, write_libero_file
 
-from lerobot_predvla import conversion
-from lerobot_predvla.commands import convert as convert_cmd
-from lerobot_predvla.commands import fit_frontend as fit_frontend_cmd
-from lerobot_predvla.configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.cli import convert as convert_cmd
+from lerobot_predvla.cli import fit_frontend as fit_frontend_cmd
+from lerobot_predvla.data import conversion
+from lerobot_predvla.data.libero_hdf5 import scan_file
 from lerobot_predvla.frontend import CAMERAS, FrontendArtefact, FrozenFrontend, LiberoDataError
-from lerobot_predvla.frontend.libero_hdf5 import scan_file
 from lerobot_predvla.frontend.preprocessing import libero_hdf5_to_lerobot
+from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
 SOUP = "pick up the alphabet soup and place it in the basket"
 MILK = "pick up the milk and place it in the basket"

@@ -1,19 +1,15 @@
 """The fused recurrence (`PredictiveModel.rollout`) against the eager reference loop over `step`."""
 
 import dataclasses
-import sys
 from functools import partial
-from pathlib import Path
 
 import pytest
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository's `benchmarks` package
-
-from benchmarks.bench_core import control_stream, randomised_model, training_data, training_loss  # noqa: E402
-from benchmarks.reference import reference_rollout  # noqa: E402
-from lerobot_predvla import PredVLAConfig  # noqa: E402
-from lerobot_predvla.error_regression import ErrorRegression  # noqa: E402
+from benchmarks.bench_core import control_stream, randomised_model, training_data, training_loss
+from lerobot_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
+from lerobot_predvla.policies.predvla.reference import reference_rollout
 
 ABLATIONS = {
     "full": {}, "A2 no bottleneck": {"use_bottleneck": False}, "A3 no efference": {"use_efference_copy": False}

@@ -12,7 +12,7 @@ from lerobot.processor.env_processor import LiberoProcessorStep
 from libero_factory import RAW_TOP_ROWS, raw_images, write_libero_file
 from safetensors.numpy import load_file
 
-from lerobot_predvla.commands import fit_frontend as fit_frontend_cmd
+from lerobot_predvla.cli import fit_frontend as fit_frontend_cmd
 from lerobot_predvla.frontend import (
     CAMERAS,
     FrontendArtefact,

@@ -17,14 +17,16 @@ import pytest
 import torch
 
 from lerobot_predvla import PredVLAPolicy
-from lerobot_predvla.cli import main as predvla_main
+from lerobot_predvla.cli.main import main as predvla_main
+from lerobot_predvla.experiments.report import write_report
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.pca import PCABasis
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import VisionWeights
-from lerobot_predvla.hub import MINILM_PARAMS, RESNET18_BACKBONE_PARAMS
-from lerobot_predvla.posterior_store import POSTERIOR_STORE_FILE
-from lerobot_predvla.report import write_report
+from lerobot_predvla.hub.publish import MINILM_PARAMS, RESNET18_BACKBONE_PARAMS
+from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
+from lerobot_predvla.utils.checkpoints import last_pretrained
+from lerobot_predvla.utils.parameters import count_parameters
 
 REPO = "someone/predvla_test"
 
@@ -83,7 +85,7 @@ def trained_and_pushed(synthetic_dataset, tmp_path_factory) -> tuple[Path, Path,
     result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     commits = json.loads((root / "commits.json").read_text())
-    return out / "checkpoints" / "last" / "pretrained_model", root / "snapshot", commits
+    return last_pretrained(out), root / "snapshot", commits
 
 
 @pytest.fixture
@@ -184,3 +186,38 @@ def test_predvla_push_publishes_exactly_the_checkpoint_files(trained_and_pushed,
 def test_push_rejects_a_directory_without_weights(tmp_path, capsys):
     assert predvla_main(["push", str(tmp_path), REPO, "--dry-run"]) == 2
     assert "not a checkpoint" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("policy_type, title", [
+    ("predvla", "# PredVLA: someone/bc"),
+    ("predvla_bc_rnn", "# BC-RNN baseline: someone/bc"),
+    ("predvla_bc_transformer", "# BC-Transformer baseline (chunk 1): someone/bc"),
+    ("predvla_ladder", "# PredVLA ladder rung L2: someone/bc"),
+])
+def test_push_dry_run_works_for_every_policy_type(tmp_path, capsys, policy_type, title):
+    from lerobot.configs import PreTrainedConfig
+    from lerobot.policies.factory import get_policy_class
+
+    config = PreTrainedConfig.get_choice_class(policy_type)(device="cpu")
+    config.validate_features()
+    policy = get_policy_class(policy_type)(config)
+    policy.save_pretrained(tmp_path / "pretrained_model")
+    card_path = tmp_path / "card.md"
+    code = predvla_main(["push", str(tmp_path), "someone/bc", "--dry-run", "--card-out", str(card_path)])
+    assert code == 0, capsys.readouterr().err
+    card = card_path.read_text()
+    assert card.startswith("---\n") and title in card and f"model_name: {policy_type}" in card
+    assert f"--policy.type={policy_type}" in card and f"| {count_parameters(policy):,} | yes |" in card
+    assert ("- predictive-coding" in card) == (policy_type in ("predvla", "predvla_ladder"))
+    assert ("Error regression runs" in card) == (policy_type == "predvla")
+    assert "$" not in card and "{{" not in card
+
+
+def test_push_refuses_another_plugins_checkpoint_in_one_line(tmp_path, capsys):
+    from safetensors.torch import save_file
+
+    (tmp_path / "config.json").write_text(json.dumps({"type": "act"}))
+    save_file({"w": torch.zeros(2)}, str(tmp_path / "model.safetensors"))
+    assert predvla_main(["push", str(tmp_path), "someone/act", "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "policy type 'act' is not one of this plugin's" in err

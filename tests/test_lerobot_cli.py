@@ -11,7 +11,9 @@ import torch
 from safetensors.torch import load_file
 
 from lerobot_predvla import PredVLAPolicy
-from lerobot_predvla.posterior_store import POSTERIOR_STORE_FILE
+from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
+
+pytestmark = pytest.mark.slow
 
 LEROBOT_TRAIN = str(Path(sys.executable).with_name("lerobot-train"))
 

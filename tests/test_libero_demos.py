@@ -10,6 +10,8 @@ import h5py
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.simulator
+
 SUITE, TASK_ID, SEED = "libero_object", 0, 7
 
 
@@ -27,7 +29,7 @@ def libero():
 
 def test_expert_episode_to_hdf5(libero, tmp_path):
     env_mod, spec = libero
-    from lerobot_predvla.libero.hdf5_layout import check_task_file, file_attrs, task_file, write_task_file
+    from lerobot_predvla.data.hdf5_layout import check_task_file, file_attrs, task_file, write_task_file
     from lerobot_predvla.libero.render import replay_observations
     from lerobot_predvla.libero.rollout import run_episode
 

@@ -16,9 +16,11 @@ import torch
 from libero_factory import write_libero_file
 from test_conversion import SUITE, convert, run_cli
 
-from lerobot_predvla.configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.frontend import FrontendArtefact, FrozenFrontend
 from lerobot_predvla.frontend.processor_step import OBS_IMAGE_FRESH, FrontendProcessorStep
+from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+
+pytestmark = pytest.mark.simulator
 
 BIN = Path(sys.executable).parent
 SOUP = "pick up the alphabet soup and place it in the basket"  # libero_object task 0
@@ -90,8 +92,8 @@ def test_predvla_libero_env_observations():
     """Fresh images every 4th step equal the demonstrations' render of the same state; proprio is joints+gripper."""
     from lerobot.envs.utils import preprocess_observation
 
+    from lerobot_predvla.envs.configs import PredVLALiberoEnv
     from lerobot_predvla.libero import env as libero_env  # first: headless MUJOCO_GL
-    from lerobot_predvla.libero.eval_config import PredVLALiberoEnv
 
     cfg = PredVLALiberoEnv(task=SUITE, task_ids=[0])
     venv = cfg.create_envs(n_envs=1)[SUITE][0]
@@ -131,8 +133,8 @@ def test_lerobots_libero_env_gives_predvla_joint_proprio():
     from lerobot.policies.act.configuration_act import ACTConfig
 
     from lerobot_predvla import PredVLAConfig
-    from lerobot_predvla.configuration_predvla_bc_rnn import PredVLABCRNNConfig
     from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+    from lerobot_predvla.policies.bc_rnn.configuration_predvla_bc_rnn import PredVLABCRNNConfig
 
     cfg = LiberoEnv(task=SUITE, task_ids=[0], observation_height=128, observation_width=128)
     venv = make_env(cfg, n_envs=1)[SUITE][0]
@@ -155,7 +157,7 @@ def test_published_files_reproduce_actions_front_end_included(checkpoint, tmp_pa
     from lerobot.policies.factory import make_pre_post_processors
 
     from lerobot_predvla import PredVLAConfig, PredVLAPolicy
-    from lerobot_predvla.hub import collect_checkpoint
+    from lerobot_predvla.hub.publish import collect_checkpoint
 
     files, _ = collect_checkpoint(checkpoint)
     assert any("predvla_frontend_processor" in name and name.endswith(".safetensors") for name in files)
@@ -179,3 +181,14 @@ def test_published_files_reproduce_actions_front_end_included(checkpoint, tmp_pa
         with torch.inference_mode():
             actions.append(torch.cat([post(policy.select_action(pre(dict(o)))) for o in observations]))
     torch.testing.assert_close(actions[0], actions[1], rtol=0, atol=0)
+
+
+def test_step_caps_are_lerobots():
+    """The per-suite caps `predvla demos` and the docs use are the ones lerobot-eval applies."""
+    from lerobot.envs.libero import TASK_SUITE_MAX_STEPS
+
+    from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+    from lerobot_predvla.libero.protocol import STEP_CAPS, SUITES
+
+    assert set(STEP_CAPS) == set(SUITES)
+    assert {suite: TASK_SUITE_MAX_STEPS[suite] for suite in SUITES} == STEP_CAPS

@@ -9,8 +9,8 @@ from lerobot.policies.factory import make_policy
 from safetensors import safe_open
 
 from lerobot_predvla import PredVLAConfig, PredVLAPolicy
-from lerobot_predvla.configuration_predvla import LONG_HORIZON_TAU
-from lerobot_predvla.posterior_store import POSTERIOR_STORE_FILE
+from lerobot_predvla.policies.predvla.configuration_predvla import LONG_HORIZON_TAU
+from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 
 
 def observation(batch: int = 1, seed: int = 0) -> dict[str, torch.Tensor]:

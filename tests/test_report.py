@@ -6,9 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lerobot_predvla.cli import main as predvla_main
-from lerobot_predvla.report import FIGURES, load_summary, write_report
-from lerobot_predvla.sweep import ConfigSpec, atomic_write_json
+from lerobot_predvla.cli.main import main as predvla_main
+from lerobot_predvla.experiments.report import FIGURES, load_summary, write_report
+from lerobot_predvla.experiments.sweep import ConfigSpec
+from lerobot_predvla.utils.io import atomic_write_json
 
 SUITES4 = ("libero_spatial", "libero_goal", "libero_object", "libero_10")
 SHORT = SUITES4[:3]

@@ -12,15 +12,15 @@ import torch.multiprocessing as mp
 import yaml
 from safetensors.torch import save_file
 
-from lerobot_predvla.cli import main as predvla_main
-from lerobot_predvla.report import write_report
-from lerobot_predvla.sweep import (
+from lerobot_predvla.cli.main import main as predvla_main
+from lerobot_predvla.experiments.eval_info import EvalInfoError, parse_eval_info
+from lerobot_predvla.experiments.report import write_report
+from lerobot_predvla.experiments.sweep import (
     TRAIN_DONE_FILE,
     Run,
     Runner,
     Sweep,
     SweepError,
-    parse_eval_info,
     parse_shard,
     subprocess_executor,
 )
@@ -198,10 +198,11 @@ def test_parse_eval_info_reads_lerobot_eval_output(tmp_path):
     ], "per_group": {}, "overall": {}}))
     assert parse_eval_info(path) == {"0": {"successes": 0, "episodes": 3}, "1": {"successes": 2, "episodes": 3}}
     path.write_text(json.dumps({"overall": {}}))
-    with pytest.raises(SweepError, match="eval_info.json"):
+    with pytest.raises(EvalInfoError, match="eval_info.json"):
         parse_eval_info(path)
 
 
+@pytest.mark.slow
 def test_real_lerobot_train_through_the_runner(synthetic_dataset, tmp_path):
     """The runner's lerobot-train command works as generated (evaluation faked: no LIBERO in tests)."""
     dataset = {"repo_id": "local/predvla_synthetic", "root": str(synthetic_dataset)}
@@ -250,6 +251,7 @@ def _ddp_worker(rank: int, world: int, init_file: str, dataset_root: str, out: s
     dist.destroy_process_group()
 
 
+@pytest.mark.slow
 def test_posterior_store_stays_consistent_under_ddp(synthetic_dataset, tmp_path):
     """Two processes, different episodes: gradients of the store are all-reduced like any parameter, so both
     replicas take the same Adam step, equal to one process seeing both batches with the averaged loss."""
@@ -341,13 +343,13 @@ class FakeData(FakeLeRobot):
     """Also stands in for `predvla demos`, `fit-frontend` and `convert`, writing the files they would write."""
 
     def __call__(self, command: list[str], log: Path) -> int:
-        if "lerobot_predvla.cli" not in command:
+        if "lerobot_predvla.cli.main" not in command:
             return super().__call__(command, log)
         self.commands.append(command)
-        stage, value = command[command.index("lerobot_predvla.cli") + 1], dict(zip(command, command[1:], strict=False))
+        stage, value = command[command.index("lerobot_predvla.cli.main") + 1], dict(zip(command, command[1:], strict=False))
         if stage == "demos":
             from lerobot_predvla.libero.env import task_spec
-            from lerobot_predvla.libero.hdf5_layout import task_file
+            from lerobot_predvla.data.hdf5_layout import task_file
 
             for task in value["--tasks"].split(","):
                 path = task_file(Path(value["--out"]), task_spec(value["--suite"], int(task)))
@@ -371,12 +373,12 @@ def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
                       eval={"device": "cpu", "tasks": [0, 1], "n_episodes": 4})
     runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FakeData())
     from lerobot_predvla.libero.env import task_spec
-    from lerobot_predvla.libero.hdf5_layout import task_file
+    from lerobot_predvla.data.hdf5_layout import task_file
 
     done_task = task_file(tmp_path / "out/hdf5", task_spec("libero_object", 1))  # a killed demos run left task 1
     done_task.parent.mkdir(parents=True)
     done_task.write_text("demos")
-    stages = [c[c.index("lerobot_predvla.cli") + 1:] for c in runner.pending_commands(["predvla"], (0, 1))[:3]]
+    stages = [c[c.index("lerobot_predvla.cli.main") + 1:] for c in runner.pending_commands(["predvla"], (0, 1))[:3]]
     assert [s[0] for s in stages] == ["demos", "fit-frontend", "convert"]
     assert stages[0][stages[0].index("--tasks") + 1] == "0" and "--language-from" in stages[1]
     # Evaluation of task 0 finished before the run was killed: only task 1 is evaluated again.
@@ -402,4 +404,4 @@ def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
     runner.record_path(Run("predvla", "libero_object", 0)).unlink()
     runner.execute = FakeData()
     assert runner.run(configs=["predvla"], progress=False)["done"] == ["predvla/libero_object/seed0"]
-    assert all("lerobot_predvla.cli" not in c for c in runner.execute.commands)
+    assert all("lerobot_predvla.cli.main" not in c for c in runner.execute.commands)

@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 from safetensors.numpy import load_file, save_file
 
-from lerobot_predvla.configuration_predvla import FRONTEND_META_DIR  # noqa: F401  (re-exported)
 from lerobot_predvla.frontend.language import LANGUAGE_ENCODER_DIM, LANGUAGE_ENCODER_NAME
 from lerobot_predvla.frontend.pca import PCABasis
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec

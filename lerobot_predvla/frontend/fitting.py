@@ -1,6 +1,5 @@
 """Fitting the front end's PCA bases jointly on LIBERO demonstrations (Section 4.1)."""
 
-import importlib.metadata
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -9,14 +8,14 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from lerobot_predvla.data.libero_hdf5 import CAMERAS, read_demo, scan_suites
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.language import LanguageEncoder
-from lerobot_predvla.frontend.libero_hdf5 import CAMERAS, read_demo, scan_suites
 from lerobot_predvla.frontend.pca import fit_pca
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec, libero_hdf5_to_lerobot, preprocess_images
 from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
-
-DEFAULT_SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+from lerobot_predvla.libero.protocol import SUITES
+from lerobot_predvla.utils.versions import package_versions
 
 
 @dataclass
@@ -43,7 +42,7 @@ class FitFrontendConfig:
 
     hdf5_root: Path
     vision_weights: VisionWeights
-    suites: tuple[str, ...] = DEFAULT_SUITES
+    suites: tuple[str, ...] = SUITES
     language_dim: int = 64
     vision_dim_per_camera: int = 96
     precision: str = "fp32"
@@ -100,10 +99,7 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
             "num_distinct_instructions": len(set(instructions)),
             "language_fit_on": "task list" if cfg.language_instructions else "demonstrations",
             "seconds": round(time.perf_counter() - start, 1),
-            "versions": {
-                pkg: importlib.metadata.version(pkg)
-                for pkg in ("torch", "torchvision", "sentence-transformers", "scikit-learn", "lerobot")
-            },
+            "versions": package_versions(("torch", "torchvision", "sentence-transformers", "scikit-learn", "lerobot")),
         },
     )
 

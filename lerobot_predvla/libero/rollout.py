@@ -9,7 +9,6 @@ from lerobot_predvla.libero.env import fixture_poses, random_reset
 from lerobot_predvla.libero.expert import ExpertFailure, ScriptedExpert
 
 SETTLE_STEPS = 5  # idle steps after reset so objects rest on their support (not recorded)
-STEP_CAPS = {"libero_spatial": 280, "libero_object": 280, "libero_goal": 300, "libero_10": 520}
 IDLE = np.array([0, 0, 0, 0, 0, 0, -1.0])
 
 

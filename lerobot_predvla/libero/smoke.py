@@ -7,7 +7,8 @@ import time
 
 import numpy as np
 
-from lerobot_predvla.libero.env import SUITES, make_env, num_tasks, random_reset, task_spec
+from lerobot_predvla.libero.env import make_env, num_tasks, random_reset, task_spec
+from lerobot_predvla.libero.protocol import SUITES
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,108 @@
+"""`predvla demos`: scripted-expert LIBERO demonstrations in the original hdf5 layout.
+
+Episodes start from randomised resets (never the official evaluation init states) and roll out
+without rendering; only successful ones are kept, and their 128x128 images are rendered afterwards
+by replaying the saved states.
+"""
+
+import argparse
+import time
+from pathlib import Path
+
+from tqdm import tqdm
+
+
+def task_ids(text: str) -> list[int]:
+    try:
+        return [int(t) for t in text.split(",") if t.strip()]
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"--tasks expects comma-separated integers, got {text!r}") from err
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("demos", help="generate scripted-expert LIBERO demonstrations (hdf5)",
+                              description=__doc__)
+    p.add_argument("--suite", default="libero_object",
+                   choices=["libero_spatial", "libero_object", "libero_goal", "libero_10"])
+    p.add_argument("--tasks", type=task_ids, default=None, help="task ids, e.g. 0,1 (default: all)")
+    p.add_argument("--per-task", type=int, default=10, help="successful demonstrations per task")
+    p.add_argument("--max-attempts", type=int, default=None, help="episodes tried per task (default 3x)")
+    p.add_argument("--max-steps", type=int, default=None, help="step cap per episode (default: suite cap)")
+    p.add_argument("--out", type=Path, default=None, help="root folder; files go to OUT/SUITE/")
+    p.add_argument("--no-render", action="store_true",
+                   help="only measure expert success: no rendering, no files (then --out is not needed)")
+    p.add_argument("--render-interval", type=int, default=1,
+                   help="render the cameras every k-th step, repeating the last images in between (default 1: "
+                   "every step, LIBERO's layout; 4 = PredVLA's visual refresh, 4x cheaper)")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=run)
+
+
+def episode_seed(seed: int, task_id: int, attempt: int) -> int:
+    return seed * 1_000_003 + task_id * 10_007 + attempt
+
+
+def run(args: argparse.Namespace) -> int:
+    from lerobot_predvla.data.hdf5_layout import file_attrs, task_file, write_task_file
+    from lerobot_predvla.libero.env import make_env, num_tasks, random_reset, task_spec
+    from lerobot_predvla.libero.protocol import STEP_CAPS
+    from lerobot_predvla.libero.render import replay_observations
+    from lerobot_predvla.libero.rollout import run_episode
+
+    if args.per_task < 1:
+        raise SystemExit("--per-task must be >= 1")
+    if args.render_interval < 1:
+        raise SystemExit("--render-interval must be >= 1")
+    if args.out is None and not args.no_render:
+        raise SystemExit("--out is required (or pass --no-render to only measure expert success)")
+    task_ids = args.tasks if args.tasks is not None else list(range(num_tasks(args.suite)))
+    max_attempts = args.max_attempts or 3 * args.per_task
+    max_steps = args.max_steps or STEP_CAPS[args.suite]
+    report = []
+    for task_id in task_ids:
+        spec = task_spec(args.suite, task_id)
+        t0 = time.time()
+        env = make_env(spec)
+        kept, attempts, notes = [], 0, []
+        with tqdm(total=args.per_task, desc=f"{args.suite}/{task_id} rollouts", unit="demo") as bar:
+            while len(kept) < args.per_task and attempts < max_attempts:
+                episode = run_episode(env, episode_seed(args.seed, task_id, attempts), max_steps)
+                attempts += 1
+                if episode.success:
+                    kept.append(episode)
+                    bar.update(1)
+                else:
+                    notes.append(episode.note)
+                bar.set_postfix(attempts=attempts)
+        env.close()
+        t_roll = time.time() - t0
+        demos = []
+        if kept and not args.no_render:
+            render_env = make_env(spec, render=True)
+            random_reset(render_env, 0)
+            attrs = {**file_attrs(spec, render_env), "predvla_render_interval": args.render_interval}
+            for episode in tqdm(kept, desc=f"{args.suite}/{task_id} rendering", unit="demo"):
+                obs = replay_observations(render_env, episode, args.render_interval)
+                demos.append({**obs, "actions": episode.actions, "states": episode.states,
+                              "model_file": episode.model_xml})
+            render_env.close()
+            path = task_file(args.out, spec)
+            write_task_file(path, attrs, demos)
+            tqdm.write(f"wrote {path} ({len(demos)} demos)")
+        steps = sum(len(e.actions) for e in kept)
+        report.append((spec, attempts, len(kept), steps, t_roll, time.time() - t0 - t_roll, notes))
+
+    print(f"\nExpert success ({args.suite}, seed {args.seed}):")
+    print(f"{'task':>4}  {'attempts':>8}  {'successes':>9}  {'rate':>5}  {'steps/demo':>10}  "
+          f"{'s/attempt':>9}  {'render s/demo':>13}  name")
+    for spec, attempts, ok, steps, t_roll, t_render, _ in report:
+        print(f"{spec.task_id:>4}  {attempts:>8}  {ok:>9}  {ok / max(attempts, 1):>5.0%}  "
+              f"{steps / max(ok, 1):>10.0f}  {t_roll / max(attempts, 1):>9.1f}  "
+              f"{t_render / max(ok, 1):>13.1f}  {spec.name}")
+    failed = [(s.task_id, n) for s, *_, n in report if n]
+    for task_id, notes in failed:
+        print(f"task {task_id} failures: {sorted(set(notes))}")
+    short = [s.task_id for s, _, ok, *_ in report if ok < args.per_task]
+    if short:
+        print(f"WARNING: tasks {short} have fewer than {args.per_task} demonstrations")
+    return 1 if any(ok == 0 for _, _, ok, *_ in report) else 0

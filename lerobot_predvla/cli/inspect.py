@@ -1,0 +1,227 @@
+"""`predvla inspect`: diagnostics of a PredVLA checkpoint against its training dataset, with plots.
+
+CHECKPOINT is a `pretrained_model` directory, or a `lerobot-train` output directory: then every saved
+checkpoint is inspected (cheap numbers, drawn over training steps) and the last one in full. Writes
+`inspect.json` and figures to --out:
+
+- open_loop_vs_demos.png: open-loop actions per task against the task's mean demonstration (+- 1 std),
+  and error regression's actions replayed on one demonstration of the task;
+- errors_over_episode.png: per-step prediction errors, complexity and free energy during error regression;
+- prior_posterior_gap.png: the posterior-prior gap per module, training posteriors and error regression;
+- language_swap.png: open-loop actions under each instruction against each task's mean demonstration;
+- training_curves.png (several checkpoints): the same numbers over training.
+"""
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from lerobot.utils.constants import CHECKPOINTS_DIR
+from lerobot.utils.constants import PRETRAINED_MODEL_DIR as PRETRAINED_DIR
+from tqdm import tqdm
+
+from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
+from lerobot_predvla.utils.checkpoints import find_pretrained
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("inspect", help="diagnostics and plots of a PredVLA checkpoint (no simulator)",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("checkpoint", type=Path, help="a pretrained_model directory or a lerobot-train output directory")
+    p.add_argument("--dataset-root", type=Path, default=None,
+                   help="training dataset (default: dataset.root of the checkpoint's train_config.json)")
+    p.add_argument("--out", type=Path, default=None, help="output directory (default: CHECKPOINT/inspect)")
+    p.add_argument("--no-er", action="store_true", help="skip the error-regression replay (the slow part)")
+    p.set_defaults(func=run)
+
+
+def find_checkpoints(path: Path) -> list[tuple[int | None, Path]]:
+    """(training step, pretrained_model directory) pairs, oldest first."""
+    pretrained = find_pretrained(path)
+    if pretrained is not None:
+        return [(None, pretrained)]
+    found = sorted((int(d.name), d / PRETRAINED_DIR) for d in (path / CHECKPOINTS_DIR).glob("*")
+                   if d.name.isdigit() and (d / PRETRAINED_DIR / "config.json").is_file())
+    if not found:
+        raise ValueError(f"{path}: no PredVLA checkpoint (expected config.json, {PRETRAINED_DIR}/ or "
+                         f"{CHECKPOINTS_DIR}/<step>/{PRETRAINED_DIR}/).")
+    return found
+
+
+def dataset_root(checkpoint: Path) -> Path:
+    train_config = checkpoint / "train_config.json"
+    if not train_config.is_file():
+        raise ValueError(f"{checkpoint}: no train_config.json to read the training dataset from; pass --dataset-root.")
+    root = json.loads(train_config.read_text()).get("dataset", {}).get("root")
+    if not root:
+        raise ValueError(f"{train_config}: dataset.root is empty; pass --dataset-root.")
+    return Path(root)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        checkpoints = find_checkpoints(args.checkpoint)
+        root = args.dataset_root or dataset_root(checkpoints[-1][1])
+        if not (root / "meta" / "info.json").is_file():
+            raise ValueError(f"{root}: not a LeRobot dataset (meta/info.json missing).")
+    except ValueError as err:
+        print(f"predvla inspect: error: {err}", file=sys.stderr)
+        return 2
+    from lerobot_predvla.policies.predvla import diagnostics as dx
+    from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
+
+    out = args.out or (args.checkpoint / "inspect")
+    out.mkdir(parents=True, exist_ok=True)
+    history, data = [], None
+    for step, path in tqdm(checkpoints, desc="checkpoints", unit="ckpt"):
+        policy = PredVLAPolicy.from_pretrained(path).eval()
+        data = data or dx.TaskData.load(root, policy)
+        report = {"step": step, "checkpoint": str(path), "language": dx.language_report(policy, data)}
+        store = dx.load_store(path)
+        if store is not None:
+            report["posteriors"] = dx.posterior_report(policy, data, store)
+        history.append(report)
+    last = history[-1]
+    replay = None
+    if not args.no_er and policy.config.er_iterations > 0:
+        episodes = [eps[0] for eps in data.episodes]
+        replay = dx.replay_error_regression(policy, data, episodes)
+        last["error_regression"] = dx.er_summary(replay, data)
+    last["tasks"] = data.names
+    plot_all(out, data, history, replay)
+    dx.write_json(out / "inspect.json", {"dataset_root": str(root), "history": history})
+    print_summary(last)
+    print(f"wrote {out / 'inspect.json'} and figures to {out}")
+    return 0
+
+
+def print_summary(report: dict) -> None:
+    lang = report["language"]
+    print(f"\nopen loop vs mean demonstrations (raw action MSE), {len(report['tasks'])} tasks:")
+    print(f"{'task':>4}  {'own':>8}  {'nearest other':>13}  name")
+    for i, name in enumerate(report["tasks"]):
+        other = lang["open_loop_mse_nearest_other_task"][i]
+        print(f"{i:>4}  {lang['open_loop_mse_own_task'][i]:>8.4f}  {other if other is None else f'{other:>13.4f}'}"
+              f"  {name}")
+    print(f"open loop closest to its own task's mean demonstration: {lang['open_loop_picks_own_task']:.0%}")
+    print(f"language swap: actions move {lang['mean_language_swap_mse']:.4f} (mean demos differ by "
+          f"{lang['mean_demo_gap']:.4f}); |W_lang l| {lang['language_drive_norm']:.3f}, "
+          f"|W_lang (l_i - l_j)| {lang['language_difference_drive_norm']:.3f}")
+    for name, p in report.get("posteriors", {}).items():
+        print(f"posteriors {name:>8}: |c_q| {p['mean_norm']:.3f}, per-task means {p['between_task_mean_distance']:.3f}"
+              f" apart vs {p['within_task_spread']:.3f} within a task, |c_q - c_p| {p['prior_gap']:.3f}")
+    if "error_regression" in report:
+        er = report["error_regression"]
+        print(f"error regression replayed on one demonstration per task: action MSE {er['er_action_mse']:.4f} "
+              f"(open loop {er['open_loop_action_mse']:.4f}); eps_q {er['er_eps_q']:.4g}, eps_v {er['er_eps_v']:.4g}")
+
+
+def plot_all(out: Path, data, history: list[dict], replay: dict | None) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def save(fig, name: str) -> None:
+        fig.tight_layout()
+        tmp = out / f".{name}.tmp.png"
+        fig.savefig(tmp, dpi=100)
+        plt.close(fig)
+        os.replace(tmp, out / name)
+
+    last = history[-1]
+    tasks = len(data.names)
+    actions = data.raw(last["language"]["open_loop_actions"])
+    means = data.raw(data.mean_action)
+    seq = data.sequences
+    dims = actions.shape[-1]
+    fig, axes = plt.subplots(tasks, dims, figsize=(2.2 * dims, 1.6 * tasks + 0.6), squeeze=False, sharex=True)
+    for t in range(tasks):
+        horizon = int(seq.length[data.episodes[t]].max())
+        demos = data.raw(seq.action[data.episodes[t], :horizon])
+        for k in range(dims):
+            ax = axes[t, k]
+            std = demos[..., k].std(0)
+            ax.fill_between(range(horizon), means[t, :horizon, k] - std, means[t, :horizon, k] + std,
+                            color="0.8", lw=0)
+            ax.plot(means[t, :horizon, k], "k", lw=1, label="mean demonstration")
+            ax.plot(actions[t, :horizon, k], "C0", lw=1, label="open loop")
+            if replay is not None:
+                n = int(replay["valid"][:, t].sum())
+                ax.plot(data.raw(replay["action"][:n, t])[:, k], "C1", lw=0.8, label="error regression (replay)")
+            if t == 0:
+                ax.set_title(f"action {k}", fontsize=8)
+            if k == 0:
+                ax.set_ylabel(f"task {t}", fontsize=8)
+            ax.tick_params(labelsize=6)
+    axes[0, 0].legend(fontsize=6, loc="best")
+    save(fig, "open_loop_vs_demos.png")
+
+    vs_demo, swap = last["language"]["open_loop_vs_mean_demos"], last["language"]["language_swap_mse"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2))
+    for ax, matrix, title in ((axes[0], vs_demo, "open loop under instruction i vs mean demo of task j"),
+                              (axes[1], swap, "open loop under instruction i vs under instruction j")):
+        image = ax.imshow(matrix, cmap="viridis")
+        ax.set(xlabel="j", ylabel="i", title=title)
+        ax.title.set_fontsize(8)
+        fig.colorbar(image, ax=ax, fraction=0.046)
+    save(fig, "language_swap.png")
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
+    width = 0.8 / len(MODULE_NAMES)
+    if "posteriors" in last:
+        gaps = [last["posteriors"][m]["prior_gap"] for m in MODULE_NAMES]
+        norms = [last["posteriors"][m]["mean_norm"] for m in MODULE_NAMES]
+        axes[0].bar([i - width / 2 for i in range(4)], gaps, width, label="|c_q - c_p|")
+        axes[0].bar([i + width / 2 for i in range(4)], norms, width, label="|c_q|")
+        axes[0].legend(fontsize=7)
+    axes[0].set(xticks=range(4), xticklabels=MODULE_NAMES, title="training posteriors (mean per step)")
+    if replay is not None:
+        for m, name in enumerate(MODULE_NAMES):
+            axes[1].plot(replay["gap"][:, :, m].mean(1), label=name)
+        axes[1].legend(fontsize=7)
+    axes[1].set(xlabel="control step", title="error regression: |c_q - c_p| at the newest step")
+    for ax in axes:
+        ax.title.set_fontsize(9)
+    save(fig, "prior_posterior_gap.png")
+
+    if replay is not None:
+        fig, axes = plt.subplots(1, 4, figsize=(15, 3.2))
+        for ax, key in zip(axes, ("eps_v", "eps_q", "free_energy"), strict=False):
+            for t in range(replay[key].shape[1]):
+                n = int(replay["valid"][:, t].sum())
+                y = replay[key][:n, t]
+                ax.plot(range(n)[:: 4 if key == "eps_v" else 1], y[:: 4 if key == "eps_v" else 1], lw=0.8)
+            ax.set(title=key, xlabel="control step", yscale="log")
+        err = (data.raw(replay["action"]) - data.raw(replay["demo_action"])).pow(2).mean(-1)
+        ol = (data.raw(replay["open_loop_action"]) - data.raw(replay["demo_action"])).pow(2).mean(-1)
+        axes[3].plot(err.mean(1), label="error regression")
+        axes[3].plot(ol.mean(1), label="open loop")
+        axes[3].set(title="action MSE vs the replayed demonstration", xlabel="control step", yscale="log")
+        axes[3].legend(fontsize=7)
+        for ax in axes:
+            ax.title.set_fontsize(9)
+        save(fig, "errors_over_episode.png")
+
+    steps = [h["step"] for h in history]
+    if len(history) > 1 and None not in steps and tasks > 1:
+        fig, axes = plt.subplots(1, 3, figsize=(14, 3.4))
+        lang = [h["language"] for h in history]
+        axes[0].plot(steps, [sum(x["open_loop_mse_own_task"]) / tasks for x in lang], label="own task")
+        axes[0].plot(steps, [sum(x["open_loop_mse_nearest_other_task"]) / tasks for x in lang],
+                     label="nearest other task")
+        axes[0].set(title="open loop vs mean demonstrations (MSE)", yscale="log")
+        axes[1].plot(steps, [x["mean_language_swap_mse"] for x in lang], label="language swap MSE")
+        axes[1].plot(steps, [x["language_difference_drive_norm"] for x in lang], label="|W_lang (l_i - l_j)|")
+        axes[1].set(title="language")
+        if all("posteriors" in h for h in history):
+            for name in MODULE_NAMES:
+                axes[2].plot(steps, [h["posteriors"][name]["prior_gap"] for h in history], label=name)
+        axes[2].set(title="training |c_q - c_p| per module")
+        for ax in axes:
+            ax.set_xlabel("training step")
+            ax.legend(fontsize=7)
+            ax.title.set_fontsize(9)
+        save(fig, "training_curves.png")

@@ -1,0 +1,85 @@
+"""`predvla push`: publish a saved checkpoint of any policy type of the plugin on the Hugging Face Hub with its card."""
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+from huggingface_hub.errors import HfHubHTTPError, OfflineModeIsEnabled
+
+from lerobot_predvla.hub.publish import HubError, push_checkpoint
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "push",
+        help="Publish a checkpoint (weights, config, processors, front end, model card) on the Hub.",
+        description=__doc__ + " The training posteriors and optimizer state are never published.",
+    )
+    parser.add_argument("checkpoint", type=Path, help="A checkpoint (e.g. outputs/RUN/checkpoints/last) or its "
+                        "pretrained_model/ directory.")
+    parser.add_argument("repo_id", help="Hub model repository, e.g. USER/predvla_libero_object.")
+    parser.add_argument("--private", action="store_true", help="Create the repository as private.")
+    parser.add_argument("--frontend", type=Path, default=None,
+                        help="Front-end artefact to publish (default: the checkpoint's, else its dataset's).")
+    parser.add_argument("--results", type=Path, default=None,
+                        help="Output directory (or report.json) of `predvla report` for the card's results table.")
+    parser.add_argument("--results-config", default=None, help="Configuration of the report to show (default predvla).")
+    parser.add_argument("--dry-run", action="store_true", help="List the files; upload nothing.")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="Write the files into this new directory instead of uploading (a local copy of what the "
+                        "Hub would get, loadable with --policy.path; local paths in its configs are cleared).")
+    parser.add_argument("--card-out", type=Path, default=None, help="Also write the rendered card to this file.")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        files, url = push_checkpoint(
+            args.checkpoint, args.repo_id, private=args.private or None, frontend=args.frontend,
+            report=args.results, report_config=args.results_config, dry_run=args.dry_run or args.out is not None,
+        )
+        if args.out is not None:
+            write_snapshot(files, args.out)
+    except (HubError, OfflineModeIsEnabled, HfHubHTTPError, FileExistsError) as err:
+        print(f"predvla push: error: {err}", file=sys.stderr)
+        return 2
+    if args.card_out is not None:
+        args.card_out.write_bytes(files["README.md"])
+    for name in sorted(files):
+        print(f"  {name}")
+    where = f"published: {url}" if url else f"written to {args.out}" if args.out else "(dry run, nothing uploaded)"
+    print(f"predvla push: {len(files)} files {where}")
+    return 0
+
+
+def write_snapshot(files: dict[str, Path | bytes], out: Path) -> None:
+    """The published files in a new directory, written beside it first and renamed into place. The training
+    machine's paths (the dataset, the front-end directory, the output directory) are cleared from the configs."""
+    if out.exists():
+        raise FileExistsError(f"--out {out} exists; choose a new directory.")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        for name, source in files.items():
+            target = staging / name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            if isinstance(source, bytes):
+                target.write_bytes(source)
+            else:
+                shutil.copyfile(source, target)
+        config = staging / "config.json"
+        if config.is_file():
+            config.write_text(json.dumps({**json.loads(config.read_text()), "frontend_dir": None}, indent=4))
+        train_config = staging / "train_config.json"
+        if train_config.is_file():
+            cfg = json.loads(train_config.read_text())
+            cfg["dataset"]["root"], cfg["output_dir"] = None, None
+            cfg["policy"]["frontend_dir"] = None
+            train_config.write_text(json.dumps(cfg, indent=4))
+        staging.rename(out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise

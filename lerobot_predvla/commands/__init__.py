@@ -1,1 +1,0 @@
-"""Subcommands of the `predvla` console command."""

@@ -1,0 +1,127 @@
+"""`--env.type=predvla_libero`: LeRobot's LIBERO evaluation with the observations PredVLA consumes.
+
+LeRobot's `libero` env type turns the robot state into an 8-dim end-effector vector and drops the joint
+positions, but PredVLA's proprioception is joints 7 + gripper 2 (Table 1), as in LIBERO's demonstrations.
+It also renders both cameras at every step although PredVLA takes a fresh image every
+`visual_refresh_interval` steps. This env type keeps LeRobot's tasks, official init states, step caps and
+vectorisation, and changes three things:
+
+- proprioception: `observation.state` = `robot0_joint_pos` (7) + `robot0_gripper_qpos` (2);
+- observations are read at the end of each control step (as `predvla demos` records them by replaying
+  saved states), not at the first physics substep;
+- cameras are rendered only every `render_interval` steps at 128 px (the demonstrations' size); the
+  steps in between repeat the last images and say so in `observation.image_fresh`.
+
+LeRobot's own `--env.type=libero` works too: LeRobot 0.6.1 chooses env processors by policy config in
+`make_env_pre_post_processors` (it special-cases X-VLA there) and offers plugins no hook, so importing this
+module wraps that function the same way for this plugin's policies. With the `libero` env type they get
+`PredVLALiberoProcessorStep` instead of LeRobot's `LiberoProcessorStep`; every other policy and env type gets
+LeRobot's processors unchanged. The other two changes above are not available there (every step is
+rendered, at 360 px unless `--env.observation_height/width=128`), so `predvla_libero` stays the default.
+"""
+
+import sys
+from dataclasses import dataclass
+
+import lerobot.envs.factory
+import torch
+from lerobot.configs.types import FeatureType, PipelineFeatureType, PolicyFeature
+from lerobot.envs.configs import EnvConfig, LiberoEnv, _make_vec_env_cls
+from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline, ProcessorStepRegistry
+from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
+
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
+from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
+
+JOINT_DIM, GRIPPER_DIM = 7, 2
+OBS_ROBOT_STATE = "observation.robot_state"
+
+
+@ProcessorStepRegistry.register("predvla_libero_processor")
+@dataclass
+class PredVLALiberoProcessorStep(ObservationProcessorStep):
+    """Rotate images by 180 degrees (LeRobot's LIBERO convention) and build joints + gripper proprio."""
+
+    def observation(self, observation: dict) -> dict:
+        out = {k: v for k, v in observation.items() if k != OBS_ROBOT_STATE}
+        for key in [k for k in out if k.startswith(f"{OBS_IMAGES}.")]:
+            out[key] = torch.flip(out[key], dims=[2, 3])
+        robot_state = observation.get(OBS_ROBOT_STATE)
+        if robot_state is None:
+            raise KeyError(f"'{OBS_ROBOT_STATE}' missing: PredVLA's proprio needs --env.obs_type=pixels_agent_pos.")
+        state = torch.cat([robot_state["joints"]["pos"], robot_state["gripper"]["qpos"]], dim=-1).float()
+        out[OBS_STATE] = state[None] if state.dim() == 1 else state
+        return out
+
+    def transform_features(
+        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
+    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
+        observation = {
+            k: v for k, v in features.get(PipelineFeatureType.OBSERVATION, {}).items() if v.type != FeatureType.STATE
+        }
+        observation[OBS_STATE] = PolicyFeature(type=FeatureType.STATE, shape=(JOINT_DIM + GRIPPER_DIM,))
+        return {**features, PipelineFeatureType.OBSERVATION: observation}
+
+
+@EnvConfig.register_subclass(EVAL_ENV_TYPE)
+@dataclass
+class PredVLALiberoEnv(LiberoEnv):
+    """LeRobot's LIBERO env config (`--env.task`, `--env.task_ids`, `--env.episode_length`, ...) for PredVLA.
+
+    `--env.episode_length=600` is the paper's step cap (Section 4.4); left unset, LeRobot's per-suite caps
+    apply (`lerobot_predvla.libero.protocol.STEP_CAPS`: 280/280/300/520 for spatial/object/goal/10).
+
+    Args:
+        render_interval: Render the cameras every this many control steps (PredVLA's
+            visual_refresh_interval, Table 1: 4); 1 renders every step.
+        observation_height: Camera height in pixels (128, the size of LIBERO's demonstrations).
+        observation_width: Camera width in pixels (128).
+    """
+
+    render_interval: int = 4
+    observation_height: int = 128
+    observation_width: int = 128
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.render_interval < 1:
+            raise ValueError(f"--env.render_interval must be >= 1, got {self.render_interval}.")
+        if self.obs_type != "pixels_agent_pos":
+            raise ValueError(f"--env.obs_type must be 'pixels_agent_pos' for predvla_libero, got {self.obs_type!r}.")
+
+    @property
+    def gym_kwargs(self) -> dict:
+        return {**super().gym_kwargs, "render_interval": self.render_interval}
+
+    def create_envs(self, n_envs: int, use_async_envs: bool = False):
+        from lerobot_predvla.envs.predvla_libero import create_envs
+
+        if self.task is None:
+            raise ValueError("--env.task is required (a LIBERO suite, e.g. libero_object).")
+        return create_envs(self, n_envs, _make_vec_env_cls(use_async_envs, n_envs))
+
+    def get_env_processors(self):
+        return libero_env_processors()
+
+
+def libero_env_processors() -> tuple[PolicyProcessorPipeline, PolicyProcessorPipeline]:
+    """Env pre/post-processors that turn LIBERO observations into what PredVLA consumes."""
+    return PolicyProcessorPipeline(steps=[PredVLALiberoProcessorStep()]), PolicyProcessorPipeline(steps=[])
+
+
+_lerobot_make_env_pre_post_processors = lerobot.envs.factory.make_env_pre_post_processors
+
+
+def make_env_pre_post_processors(env_cfg: EnvConfig, policy_cfg) -> tuple:
+    """LeRobot's `make_env_pre_post_processors`, with PredVLA's LIBERO step for this plugin's policies."""
+    if type(env_cfg) is LiberoEnv and isinstance(policy_cfg, CachedFeaturesConfig):
+        return libero_env_processors()
+    return _lerobot_make_env_pre_post_processors(env_cfg, policy_cfg)
+
+
+# The modules that bind LeRobot's function by name: the factory, its package, and the CLI scripts (loaded
+# before plugins when run as `lerobot-eval` / `lerobot-train`; imported later, they take it from the package).
+for _name in ("lerobot.envs.factory", "lerobot.envs", "lerobot.scripts.lerobot_eval", "lerobot.scripts.lerobot_train"):
+    _module = sys.modules.get(_name)
+    if getattr(_module, "make_env_pre_post_processors", None) is _lerobot_make_env_pre_post_processors:
+        _module.make_env_pre_post_processors = make_env_pre_post_processors

@@ -1,0 +1,546 @@
+"""Paper-format tables and figures from the run records of `predvla sweep`.
+
+Inputs: `RUNS_DIR/records/**/*.json` (one per configuration, suite and seed) and, when present,
+`RUNS_DIR/plan.json` (every planned run and each configuration's description), which lets the report mark runs
+that are missing. Outputs in REPORT_DIR: `report.md` (Markdown tables and figures, readable on GitHub),
+`report.json` (the aggregates, read by `predvla push --results`) and the PNG figures.
+
+Success rates are percentages per (configuration, suite, seed): successes / episodes over all tasks. Tables
+show mean +/- sample standard deviation across seeds; 3-suite (spatial, goal, object) and 4-suite means are
+means of the suite means and need every suite. Paired differences use the seeds both configurations have.
+"""
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
+from lerobot_predvla.utils.io import atomic_write_json, atomic_write_text
+
+SUMMARY_FILE = "report.json"
+REPORT_FILE = "report.md"
+FIGURES = {
+    "ladder": "ladder.png",
+    "params": "params_vs_success.png",
+    "pertask": "ablation_pertask.png",
+    "corruption": "corruption.png",
+}
+# Published LIBERO 4-suite means for context (trainable parameters, mean success %); not a controlled comparison.
+PUBLISHED_REFERENCES = (
+    ("OpenVLA", 7.0e9, 76.5),
+    ("Octo", 93e6, 75.1),
+    ("SmolVLA", 0.45e9, 87.3),
+    ("pi0", 3.3e9, 94.15),
+    ("PredVLA (paper)", 675_732, 75.35),
+)
+PARAMETERLESS_REFERENCES = (("Diffusion Policy", 72.4),)  # its parameter count is not given with the result
+MISSING = "—"
+
+
+class ReportError(ValueError):
+    """No usable records, or a malformed record or plan."""
+
+
+def _load_json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        raise ReportError(f"{path}: unreadable JSON ({err}).") from err
+
+
+def load_records(runs_dir: Path) -> list[dict]:
+    records_dir = Path(runs_dir) / "records"
+    paths = sorted(records_dir.rglob("*.json")) if records_dir.is_dir() else []
+    if not paths:
+        raise ReportError(f"{records_dir}: no run records (*.json); run `predvla sweep ... --runs-dir {runs_dir}`.")
+    records = []
+    for path in paths:
+        record = _load_json(path)
+        missing = [k for k in ("config", "suite", "seed", "tasks") if k not in record]
+        if missing:
+            raise ReportError(f"{path}: not a sweep run record (missing {missing}).")
+        records.append(record)
+    return records
+
+
+def load_summary(path: Path) -> dict:
+    """The `report.json` of a report directory (or the file itself)."""
+    path = Path(path)
+    path = path / SUMMARY_FILE if path.is_dir() else path
+    if not path.is_file():
+        raise ReportError(f"{path}: no {SUMMARY_FILE}; run `predvla report RUNS_DIR --out REPORT_DIR` first.")
+    return _load_json(path)
+
+
+def success_rate(record: dict) -> float:
+    tasks = record["tasks"].values()
+    return 100.0 * sum(t["successes"] for t in tasks) / sum(t["episodes"] for t in tasks)
+
+
+def _mean_std(values: list[float]) -> tuple[float | None, float | None]:
+    if not values:
+        return None, None
+    arr = np.asarray(values, dtype=float)
+    return float(arr.mean()), float(arr.std(ddof=1)) if len(arr) > 1 else 0.0
+
+
+@dataclass
+class Results:
+    """Per-seed success rates and per-task rates, indexed by configuration and suite."""
+
+    rates: dict[str, dict[str, dict[int, float]]]  # config -> suite -> seed -> %
+    tasks: dict[str, dict[str, dict[int, dict[str, float]]]]  # config -> suite -> seed -> task -> %
+    planned: dict[str, dict[str, list[int]]]  # config -> suite -> seeds
+    configs: dict[str, dict]  # config -> description (group, label, compare_to, branch, corruption, ...)
+    params: dict[str, int | None]
+    protocol: str
+
+    @classmethod
+    def build(cls, records: list[dict], plan: dict | None) -> "Results":
+        rates: dict = {}
+        tasks: dict = {}
+        configs: dict = dict(plan["configs"]) if plan else {}
+        params: dict = {}
+        for r in records:
+            rates.setdefault(r["config"], {}).setdefault(r["suite"], {})[int(r["seed"])] = success_rate(r)
+            tasks.setdefault(r["config"], {}).setdefault(r["suite"], {})[int(r["seed"])] = {
+                k: 100.0 * t["successes"] / t["episodes"] for k, t in r["tasks"].items()
+            }
+            configs.setdefault(r["config"], {k: r.get(k) for k in (
+                "group", "label", "compare_to", "branch", "corruption", "eval_overrides")})
+            if r.get("parameters") is not None:
+                params[r["config"]] = int(r["parameters"])
+        planned: dict = {}
+        for run in plan["runs"] if plan else []:
+            planned.setdefault(run["config"], {}).setdefault(run["suite"], []).append(int(run["seed"]))
+        for name in configs:
+            params.setdefault(name, None)
+            if name not in planned:  # without a plan, what was run is what was planned
+                planned[name] = {s: sorted(seeds) for s, seeds in rates.get(name, {}).items()}
+        episodes = sorted({int(r["n_episodes_per_task"]) for r in records if "n_episodes_per_task" in r})
+        caps = sorted({int(r["episode_length"]) for r in records if "episode_length" in r})
+        protocol = (f"{'/'.join(map(str, episodes)) or '?'} rollouts per task, "
+                    f"{'/'.join(map(str, caps)) or '?'}-step cap")
+        return cls(rates, tasks, planned, configs, params, protocol)
+
+    # ----- aggregates -------------------------------------------------------------------------------------
+    def suites(self) -> list[str]:
+        present = {s for by_suite in self.planned.values() for s in by_suite} | {
+            s for by_suite in self.rates.values() for s in by_suite}
+        return [s for s in (*SHORT_SUITES, "libero_10") if s in present]
+
+    def cell(self, config: str, suite: str) -> dict:
+        seeds = self.rates.get(config, {}).get(suite, {})
+        mean, std = _mean_std(list(seeds.values()))
+        planned = self.planned.get(config, {}).get(suite, [])
+        return {"mean": mean, "std": std, "n": len(seeds), "planned": len(planned),
+                "seeds": {str(k): v for k, v in sorted(seeds.items())},
+                "missing_seeds": sorted(set(planned) - set(seeds))}
+
+    def suite_mean(self, config: str, suites: tuple[str, ...]) -> float | None:
+        means = [self.cell(config, s)["mean"] for s in suites]
+        return float(np.mean(means)) if all(m is not None for m in means) else None
+
+    def paired(self, config: str, reference: str, suite: str) -> dict:
+        """Mean and std over matched seeds of (config - reference)."""
+        a, b = self.rates.get(config, {}).get(suite, {}), self.rates.get(reference, {}).get(suite, {})
+        seeds = sorted(set(a) & set(b))
+        mean, std = _mean_std([a[s] - b[s] for s in seeds])
+        return {"delta": mean, "std": std, "n": len(seeds), "seeds": seeds}
+
+    def of_group(self, group: str) -> list[str]:
+        return [name for name, c in self.configs.items() if c.get("group") == group]
+
+    def reference(self) -> str | None:
+        """The intact model: `predvla` when present, else the first main configuration."""
+        main = self.of_group("main")
+        return "predvla" if "predvla" in self.configs else (main[0] if main else None)
+
+    def ladder_previous(self) -> dict[str, str | None]:
+        """Each rung's comparison rung: `compare_to`, else the preceding main-chain rung."""
+        previous, last = {}, self.reference()  # the chain starts at the intact model (L0)
+        for name in self.of_group("ladder"):
+            c = self.configs[name]
+            previous[name] = c.get("compare_to") or last
+            if not c.get("branch"):
+                last = name
+        return previous
+
+    def summary(self) -> dict:
+        previous = self.ladder_previous()
+        reference = self.reference()
+        out = {"protocol": self.protocol, "suites": self.suites(), "reference": reference, "configs": {}}
+        for name, c in self.configs.items():
+            entry = {**{k: c.get(k) for k in ("group", "label", "compare_to", "branch", "corruption")},
+                     "params": self.params.get(name),
+                     "suites": {s: self.cell(name, s) for s in self.suites()},
+                     "mean3": self.suite_mean(name, SHORT_SUITES),
+                     "mean4": self.suite_mean(name, SUITES)}
+            against = previous.get(name) if c.get("group") == "ladder" else (
+                c.get("compare_to") or (reference if c.get("group") in ("ablation", "corruption") else None))
+            if against and against != name:
+                entry["paired_against"] = against
+                entry["paired"] = {s: self.paired(name, against, s) for s in self.suites()}
+                m, p = entry["mean3"], self.suite_mean(against, SHORT_SUITES)
+                entry["delta_mean3"] = m - p if m is not None and p is not None else None
+            out["configs"][name] = entry
+        return out
+
+
+# ----- tables --------------------------------------------------------------------------------------------
+def fmt_cell(cell: dict) -> str:
+    if cell["n"] == 0:
+        return f"{MISSING} (0/{cell['planned']})" if cell["planned"] else MISSING
+    text = f"{cell['mean']:.2f} ± {cell['std']:.2f}"
+    return text + (f" ({cell['n']}/{cell['planned']} seeds)" if cell["n"] < cell["planned"] else "")
+
+
+def fmt_num(value: float | None, signed: bool = False) -> str:
+    if value is None:
+        return MISSING
+    return f"{value:+.2f}" if signed else f"{value:.2f}"
+
+
+def fmt_params(value: int | None) -> str:
+    return f"{value:,}" if value is not None else MISSING
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])
+
+
+def _label(summary: dict, name: str) -> str:
+    return summary["configs"][name].get("label") or name
+
+
+def main_table(summary: dict) -> str | None:
+    names = [n for n, c in summary["configs"].items() if c["group"] == "main"]
+    if not names:
+        return None
+    suites = summary["suites"]
+    short = [s for s in SHORT_SUITES if s in suites]
+    header = ["Model", "Params", *[SUITE_LABELS[s] for s in short], "3-suite mean"]
+    if "libero_10" in suites:
+        header += ["long", "4-suite mean"]
+    rows = []
+    for n in names:
+        c = summary["configs"][n]
+        row = [_label(summary, n), fmt_params(c["params"]), *[fmt_cell(c["suites"][s]) for s in short],
+               fmt_num(c["mean3"])]
+        if "libero_10" in suites:
+            row += [fmt_cell(c["suites"]["libero_10"]), fmt_num(c["mean4"])]
+        rows.append(row)
+    return _table(header, rows)
+
+
+def baseline_table(summary: dict) -> str | None:
+    names = [n for n, c in summary["configs"].items() if c["group"] == "baseline"]
+    if not names:
+        return None
+    ref = summary["reference"]
+    ref_params = summary["configs"][ref]["params"] if ref else None
+    suites = summary["suites"]
+    rows = []
+    for n in [*names, *([ref] if ref else [])]:
+        c = summary["configs"][n]
+        ratio = f"{c['params'] / ref_params:.3f}×" if c["params"] and ref_params else MISSING
+        mean = c["mean4"] if "libero_10" in suites else c["mean3"]
+        rows.append([n if n != ref else "—", _label(summary, n) + (" (ours)" if n == ref else ""),
+                     fmt_params(c["params"]), ratio, *[fmt_cell(c["suites"][s]) for s in suites], fmt_num(mean)])
+    return _table(["", "Model", "Params", "vs. ours", *[SUITE_LABELS[s] for s in suites], "Mean"], rows)
+
+
+def ladder_rungs(summary: dict) -> tuple[list[str], list[str]]:
+    """(main chain starting at the intact model, side branches) of the ladder; empty without ladder configs."""
+    configs = summary["configs"]
+    ladder = [n for n, c in configs.items() if c["group"] == "ladder"]
+    if not ladder:
+        return [], []
+    ref = summary["reference"]
+    chain = ([ref] if ref and ref not in ladder else []) + [n for n in ladder if not configs[n]["branch"]]
+    return chain, [n for n in ladder if configs[n]["branch"]]
+
+
+def ladder_table(summary: dict) -> str | None:
+    chain, branches = ladder_rungs(summary)
+    if not chain:
+        return None
+    short = [s for s in SHORT_SUITES if s in summary["suites"]]
+    ordered = chain + branches
+    rows = []
+    for n in ordered:
+        c = summary["configs"][n]
+        delta = fmt_num(c.get("delta_mean3"), signed=True) if c.get("paired_against") else MISSING
+        rows.append([n, _label(summary, n), fmt_params(c["params"]), *[fmt_cell(c["suites"][s]) for s in short],
+                     fmt_num(c["mean3"]), delta])
+    return _table(["", "Modification", "Params", *[SUITE_LABELS[s] for s in short], "Mean", "Δ"], rows)
+
+
+def ablation_table(summary: dict) -> str | None:
+    names = [n for n, c in summary["configs"].items() if c["group"] == "ablation"]
+    if not names:
+        return None
+    suites = summary["suites"]
+    rows = []
+    for n in names:
+        c = summary["configs"][n]
+        rows.append([n, _label(summary, n), *[fmt_cell(c["suites"][s]) for s in suites]])
+        paired = c.get("paired", {})
+        deltas = []
+        for s in suites:
+            p = paired.get(s)
+            deltas.append(MISSING if not p or p["n"] == 0 else f"{p['delta']:+.2f} (n={p['n']})")
+        rows.append(["", f"  Δ vs {c.get('paired_against', MISSING)} (paired seeds)", *deltas])
+    return _table(["", "Change from PredVLA", *[SUITE_LABELS[s] for s in suites]], rows)
+
+
+def corruption_table(summary: dict) -> str | None:
+    names = [n for n, c in summary["configs"].items() if c["group"] == "corruption" and c.get("corruption")]
+    if not names:
+        return None
+    suites = [s for s in summary["suites"] if any(summary["configs"][n]["suites"][s]["n"] for n in names)]
+    rows = []
+    for n in sorted(names, key=lambda n: (summary["configs"][n]["corruption"].get("channel", ""),
+                                          summary["configs"][n]["corruption"].get("alpha", 0))):
+        c = summary["configs"][n]
+        rows.append([n, str(c["corruption"].get("channel")), str(c["corruption"].get("alpha")),
+                     *[fmt_cell(c["suites"][s]) for s in suites]])
+    return _table(["", "channel", "α", *[SUITE_LABELS[s] for s in suites]], rows)
+
+
+# ----- figures -------------------------------------------------------------------------------------------
+def _save(fig, path: Path) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    fig.savefig(tmp, format="png", dpi=130, bbox_inches="tight")
+    os.replace(tmp, path)
+
+
+def ladder_figure(summary: dict, path: Path) -> bool:
+    import matplotlib.pyplot as plt
+
+    configs = summary["configs"]
+    chain, branches = ladder_rungs(summary)
+    if not chain:
+        return False
+    short = [s for s in SHORT_SUITES if s in summary["suites"]]
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    x = {n: i for i, n in enumerate(chain)}
+    colors = dict(zip(short, ("tab:blue", "tab:orange", "tab:green"), strict=False))
+
+    def value(n: str, s: str | None) -> float:
+        v = configs[n]["mean3"] if s is None else configs[n]["suites"][s]["mean"]
+        return np.nan if v is None else v
+
+    for s in [*short, None]:
+        style = {"color": "black", "linewidth": 3, "label": "3-suite mean"} if s is None else {
+            "color": colors[s], "linewidth": 1.2, "label": SUITE_LABELS[s]}
+        ax.plot(range(len(chain)), [value(n, s) for n in chain], marker="o", **style)
+        for b in branches:
+            parent = configs[b].get("paired_against")
+            if parent in x:
+                bx = x[parent] + 0.5
+                ax.plot([x[parent], bx], [value(parent, s), value(b, s)], linestyle="--", marker="s",
+                        color=style["color"], linewidth=style["linewidth"] * 0.7)
+                if s is None:
+                    ax.annotate(b, (bx, value(b, s)), textcoords="offset points", xytext=(5, -10))
+    ax.set_xticks(range(len(chain)), chain)
+    ax.set_ylabel("success rate (%)")
+    ax.set_ylim(0, 100)
+    ax.set_title("Ladder: PredVLA to BC-RNN (dashed: side branches)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8)
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+def params_figure(summary: dict, path: Path) -> bool:
+    import matplotlib.pyplot as plt
+
+    four = "libero_10" in summary["suites"]
+    key = "mean4" if four else "mean3"
+    ours = [(n, c["params"], c[key]) for n, c in summary["configs"].items()
+            if c["group"] in ("main", "baseline") and c["params"] and c[key] is not None]
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    baseline_params = [c["params"] for c in summary["configs"].values() if c["group"] == "baseline" and c["params"]]
+    if baseline_params:
+        ax.axvspan(min(baseline_params) * 0.95, max(baseline_params) * 1.05, color="gray", alpha=0.15,
+                   label="controlled baselines (params range)")
+    for i, (name, params, success) in enumerate(PUBLISHED_REFERENCES):
+        ax.scatter(params, success, marker="^", color="tab:gray", label="published (reported)" if i == 0 else None)
+        ax.annotate(name, (params, success), textcoords="offset points", xytext=(5, 4), fontsize=8)
+    for name, success in PARAMETERLESS_REFERENCES:
+        ax.axhline(success, color="tab:gray", linestyle=":", linewidth=1)
+        ax.annotate(f"{name} {success} (params not reported)", (1e7, success), textcoords="offset points",
+                    xytext=(0, -11), fontsize=8, color="tab:gray")
+    for i, (name, params, success) in enumerate(ours):
+        ax.scatter(params, success, marker="o", color="tab:red", zorder=3, label="this sweep" if i == 0 else None)
+        ax.annotate(name, (params, success), textcoords="offset points", xytext=(5, -10), fontsize=8, color="tab:red")
+    ax.set_xscale("log")
+    ax.set_xlim(1e5, 2e10)
+    ax.set_ylim(0, 100)
+    ax.set_xlabel("trainable policy parameters")
+    ax.set_ylabel(f"LIBERO mean success (%) — ours: {'4' if four else '3'}-suite mean")
+    ax.set_title("Parameters vs success (published points: reported numbers, not controlled)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(loc="lower right", fontsize=8)
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+def sensory_ablations(results: Results) -> list[tuple[str, str]]:
+    """(config, channel) of the error-channel ablations: eval overrides setting er_lambda_v / er_lambda_q to 0."""
+    found = []
+    for name, c in results.configs.items():
+        overrides = c.get("eval_overrides") or {}
+        for field, channel in (("er_lambda_v", "visual"), ("er_lambda_q", "proprioceptive")):
+            if field in overrides and float(overrides[field]) == 0.0:
+                found.append((name, channel))
+    return found
+
+
+def pertask_figure(results: Results, path: Path) -> bool:
+    """Per task: the intact model's success (gray) and each sensory ablation's paired change (colored)."""
+    import matplotlib.pyplot as plt
+
+    ablations = sensory_ablations(results)
+    reference = results.reference()
+    if not ablations or reference is None:
+        return False
+    suites = [s for s in results.suites() if any(results.tasks.get(a, {}).get(s) for a, _ in ablations)]
+    if not suites:
+        return False
+    fig, axes = plt.subplots(1, len(suites), figsize=(5 * len(suites), 4), squeeze=False)
+    colors = ("tab:blue", "tab:orange")
+    for ax, suite in zip(axes[0], suites, strict=True):
+        intact = results.tasks.get(reference, {}).get(suite, {})
+        task_ids = sorted({t for seed in intact.values() for t in seed}, key=int)
+        base = [np.mean([intact[s][t] for s in intact]) if intact else np.nan for t in task_ids]
+        deltas = []
+        for name, _ in ablations:
+            runs = results.tasks.get(name, {}).get(suite, {})
+            seeds = sorted(set(runs) & set(intact))
+            deltas.append([np.mean([runs[s][t] - intact[s][t] for s in seeds]) if seeds else np.nan
+                           for t in task_ids])
+        order = np.argsort(np.nan_to_num(deltas[0], nan=0.0))
+        xs = np.arange(len(task_ids))
+        width = 0.8 / (1 + len(ablations))
+        ax.bar(xs, np.asarray(base)[order], width, color="lightgray", label=f"{reference} (intact)")
+        for i, ((name, channel), delta) in enumerate(zip(ablations, deltas, strict=True)):
+            ax.bar(xs + (i + 1) * width, np.asarray(delta)[order], width, color=colors[i % 2],
+                   label=f"{name}: change without {channel} error")
+        ax.axhline(0, color="black", linewidth=0.8)
+        ax.set_xticks(xs + width * len(ablations) / 2, [task_ids[i] for i in order])
+        ax.set_xlabel("task id (sorted by the first ablation's change)")
+        ax.set_title(SUITE_LABELS[suite])
+        ax.set_ylim(-100, 100)
+    axes[0][0].set_ylabel("success (%) / change (points)")
+    axes[0][-1].legend(fontsize=7, loc="lower right")
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+def corruption_figure(summary: dict, path: Path) -> bool:
+    import matplotlib.pyplot as plt
+
+    configs = summary["configs"]
+    names = [n for n, c in configs.items() if c["group"] == "corruption" and c.get("corruption")]
+    if not names:
+        return False
+    suites = [s for s in summary["suites"] if any(configs[n]["suites"][s]["n"] for n in names)]
+    if not suites:
+        return False
+    fig, axes = plt.subplots(1, len(suites), figsize=(4.5 * len(suites), 3.8), squeeze=False)
+    channels = sorted({configs[n]["corruption"].get("channel") for n in names})
+    for ax, suite in zip(axes[0], suites, strict=True):
+        for channel, color in zip(channels, ("tab:blue", "tab:orange", "tab:green"), strict=False):
+            points = []
+            for n in names:
+                spec = configs[n]["corruption"]
+                cell = configs[n]["suites"][suite]
+                if spec.get("channel") == channel and cell["n"]:
+                    points.append((float(spec["alpha"]), cell["mean"], cell["std"]))
+            intact = configs.get(configs[names[0]].get("paired_against") or "", {}).get("suites", {}).get(suite)
+            if intact and intact["n"]:
+                points.append((0.0, intact["mean"], intact["std"]))
+            points.sort()
+            if points:
+                a, m, sd = (np.asarray(v) for v in zip(*points, strict=True))
+                ax.plot(a, m, marker="o", color=color, label=str(channel))
+                ax.fill_between(a, m - sd, m + sd, color=color, alpha=0.2)
+        open_loop = {configs[n]["corruption"].get("open_loop") for n in names} - {None}
+        for ref in open_loop:
+            cell = configs.get(ref, {}).get("suites", {}).get(suite)
+            if cell and cell["n"]:
+                ax.axhline(cell["mean"], color="black", linestyle="--", linewidth=1, label=f"open loop ({ref})")
+        ax.set_xlabel("α (fraction of observations replaced)")
+        ax.set_title(SUITE_LABELS[suite])
+        ax.set_ylim(0, 100)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("success rate (%)")
+    axes[0][-1].legend(fontsize=8)
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+# ----- report ----------------------------------------------------------------------------------------------
+def write_report(runs_dir: Path, out: Path) -> dict:
+    """Build tables, figures, `report.md` and `report.json` in `out`; returns the summary."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    records = load_records(runs_dir)
+    plan_path = Path(runs_dir) / "plan.json"
+    results = Results.build(records, _load_json(plan_path) if plan_path.is_file() else None)
+    summary = results.summary()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    made = {
+        "ladder": ladder_figure(summary, out / FIGURES["ladder"]),
+        "params": params_figure(summary, out / FIGURES["params"]),
+        "pertask": pertask_figure(results, out / FIGURES["pertask"]),
+        "corruption": corruption_figure(summary, out / FIGURES["corruption"]),
+    }
+    summary["figures"] = {k: FIGURES[k] for k, ok in made.items() if ok}
+    missing = [f"{name}/{suite}/seed{seed}" for name, c in summary["configs"].items()
+               for suite, cell in c["suites"].items() for seed in cell["missing_seeds"]]
+    summary["missing_runs"] = missing
+    sections = [
+        "# PredVLA experiment report",
+        "",
+        f"{len(records)} runs from `{runs_dir}`; protocol: {summary['protocol']}. Success rates in %, mean ± "
+        f"standard deviation across seeds; {MISSING} marks a missing result, (k/n seeds) a partial one.",
+    ]
+    for title, table, figure, note in (
+        ("Main results", main_table(summary), None, "3-suite mean: spatial, goal, object; 4-suite adds long."),
+        ("Controlled baselines", baseline_table(summary), None, "Mean over the suites shown."),
+        ("Trainable parameters vs success", None, "params",
+         "Published points are reported numbers with different protocols, for scale only."),
+        ("Ladder", ladder_table(summary), "ladder",
+         "Δ: change in the 3-suite mean relative to the preceding rung (side branches: relative to their parent)."),
+        ("Ablations", ablation_table(summary), "pertask",
+         "Δ: mean paired difference from the intact model over the seeds both have (n)."),
+        ("Corrupted observations", corruption_table(summary), "corruption",
+         "α: fraction of observations replaced; bands ±1 seed standard deviation; dashed: open loop."),
+    ):
+        has_figure = figure in summary["figures"]
+        if table is None and not has_figure:
+            continue
+        sections += ["", f"## {title}", "", note]
+        if table is not None:
+            sections += ["", table]
+        if has_figure:
+            sections += ["", f"![{title}]({FIGURES[figure]})"]
+    if missing:
+        sections += ["", "## Missing runs", "", f"{len(missing)} planned runs have no record:", "",
+                     *[f"- `{m}`" for m in missing]]
+    atomic_write_text(out / REPORT_FILE, "\n".join(sections) + "\n")
+    atomic_write_json(out / SUMMARY_FILE, summary)
+    return summary

@@ -1,0 +1,685 @@
+"""Experiment runner: `lerobot-train` then `lerobot-eval` for configurations x suites x seeds.
+
+A sweep file (YAML or JSON) lists configurations; every (configuration, suite, seed) is one run whose result is
+a JSON record `RUNS_DIR/records/<config>/<suite>/seed<k>.json`. Runs with a record are skipped, a training
+killed midway resumes from its last checkpoint (`lerobot-train --resume=true`), an evaluation killed midway is
+redone. Inference-time variants (`checkpoint_from: <config>`) evaluate another configuration's checkpoints
+with extra `lerobot-eval` arguments and train nothing themselves.
+
+Scaling out: `--shard i/n` runs every n-th training unit (a checkpoint with all evaluations that use it), so n
+processes or hosts sharing RUNS_DIR split a sweep without overlap; `accelerate_processes > 1` trains each run
+with `accelerate launch --multi_gpu` (LeRobot's multi-GPU path).
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from lerobot_predvla.utils.checkpoints import last_pretrained
+from lerobot_predvla.utils.io import atomic_write_json
+from lerobot_predvla.utils.parameters import count_parameters
+from lerobot_predvla.utils.versions import package_versions
+
+PAPER_TRAIN_STEPS = 30_000
+PAPER_BATCH_SIZE = 32
+GROUPS = ("main", "baseline", "ladder", "ablation", "corruption")
+# The unrelated episode of a corruption run comes from another suite's dataset, so it is unrelated to every task
+# of the evaluated suite (Section 4.4: "observations from an unrelated episode").
+CORRUPTION_SOURCE = {"libero_spatial": "libero_goal", "libero_goal": "libero_object",
+                     "libero_object": "libero_spatial", "libero_10": "libero_spatial"}
+CORRUPTION_KEYS = {"channel", "alpha", "source_suite", "episode", "open_loop"}
+TRAIN_DONE_FILE = "predvla_sweep_train.json"  # written beside a finished training's checkpoints
+EVAL_WALL_FILE = "predvla_sweep_eval.json"  # wall time of one evaluation part, beside its eval_info.json
+
+Executor = Callable[[list[str], Path], int]  # (command, log file) -> exit code
+
+
+class SweepError(ValueError):
+    """A malformed sweep file or an impossible request."""
+
+
+def _as_args(values: dict, prefix: str) -> list[str]:
+    """{"tau": [30, 14, 8, 2], "x": {"y": 1}} -> ["--policy.tau=[30,14,8,2]", "--policy.x.y=1"]."""
+    args = []
+    for key, value in values.items():
+        if isinstance(value, dict):
+            args += _as_args(value, f"{prefix}.{key}")
+        elif isinstance(value, bool):
+            args.append(f"--{prefix}.{key}={str(value).lower()}")
+        elif isinstance(value, list | tuple):
+            args.append(f"--{prefix}.{key}=[{','.join(map(str, value))}]")
+        elif value is not None:
+            args.append(f"--{prefix}.{key}={value}")
+    return args
+
+
+@dataclass
+class ConfigSpec:
+    """One configuration of a sweep file.
+
+    Args:
+        name: Unique name (a run directory component and the report's row label), e.g. `predvla`, `L3`, `A6`.
+        group: Report section: main, baseline, ladder, ablation or corruption.
+        label: Description shown in the report (e.g. "- Online ER (n_itr=0)").
+        policy: A policy type (`predvla`) or a JSON file of policy fields with `type` (`configs/policy/L3.json`),
+            turned into `--policy.type=... --policy.<field>=...`.
+        policy_overrides: Extra policy fields for training (`{"tau": [8, 8, 8, 8]}`).
+        train_args: Extra raw `lerobot-train` arguments.
+        suite_overrides: Policy fields per suite (`{"libero_10": {"tau": [30, 14, 8, 2], "sequence_length": 500}}`).
+        eval_overrides: Policy fields at evaluation (`{"er_iterations": 0}`).
+        eval_args: Extra raw `lerobot-eval` arguments.
+        checkpoint_from: Evaluate this configuration's checkpoints instead of training (inference-time variants).
+        compare_to: Ablations: the intact configuration for paired differences; ladder: the preceding rung.
+        branch: Ladder side branch (dashed in the figure, not part of the main chain).
+        corruption: A corruption-curve point (Section 4.4): `{"channel": "vision" | "proprio", "alpha": 0.25}`, optional
+            `source_suite` (whose dataset holds the unrelated episode; default: another suite, see
+            `CORRUPTION_SOURCE`), `episode` (its episode index, default 0) and `open_loop` (the configuration whose
+            success the report draws as the open-loop line). Becomes `--policy.er_corruption_*` at evaluation.
+        suites, seeds, steps, n_episodes: Per-configuration replacements of the sweep-wide values.
+    """
+
+    name: str
+    group: str = "main"
+    label: str = ""
+    policy: str = "predvla"
+    policy_overrides: dict = field(default_factory=dict)
+    train_args: list[str] = field(default_factory=list)
+    suite_overrides: dict[str, dict] = field(default_factory=dict)
+    eval_overrides: dict = field(default_factory=dict)
+    eval_args: list[str] = field(default_factory=list)
+    checkpoint_from: str | None = None
+    compare_to: str | None = None
+    branch: bool = False
+    corruption: dict | None = None
+    suites: list[str] | None = None
+    seeds: list[int] | None = None
+    steps: int | None = None
+    n_episodes: int | None = None
+
+    def policy_args(self, base_dir: Path, suite: str) -> list[str]:
+        if self.policy.endswith(".json"):
+            path = Path(self.policy) if Path(self.policy).is_absolute() else base_dir / self.policy
+            if not path.is_file():
+                raise SweepError(f"configuration {self.name}: policy file {path} not found.")
+            fields = json.loads(path.read_text())
+            fields = dict(fields.get("policy", fields))  # a `lerobot-train --config_path` file nests the policy
+            if "type" not in fields:
+                raise SweepError(f"{path}: expected a `type` field naming the policy type.")
+            policy_type = fields.pop("type")
+        else:
+            policy_type, fields = self.policy, {}
+        fields = {**fields, **self.policy_overrides, **self.suite_overrides.get(suite, {})}
+        return [f"--policy.type={policy_type}", *_as_args(fields, "policy")]
+
+
+@dataclass
+class Settings:
+    """Sweep-wide values; the paper's protocol unless the sweep file or the command line says otherwise."""
+
+    seeds: list[int] = field(default_factory=lambda: [0])
+    suites: list[str] = field(default_factory=lambda: list(SUITES))
+    datasets: dict[str, dict] = field(default_factory=dict)  # suite -> {repo_id, root}
+    steps: int = PAPER_TRAIN_STEPS
+    batch_size: int = PAPER_BATCH_SIZE
+    save_freq: int = 5_000
+    train_device: str = "cuda"
+    train_args: list[str] = field(default_factory=list)
+    accelerate_processes: int = 1
+    n_episodes: int = PAPER_EPISODES_PER_TASK
+    episode_length: int = PAPER_EPISODE_LENGTH
+    eval_batch_size: int = 1
+    eval_device: str = "cuda"
+    env_type: str = EVAL_ENV_TYPE
+    eval_args: list[str] = field(default_factory=list)
+    eval_tasks: list[int] | None = None  # evaluate task by task: one lerobot-eval (and one resumable unit) per task
+    data: dict[str, "DataSpec"] = field(default_factory=dict)  # suite -> how its dataset is made
+
+
+@dataclass
+class DataSpec:
+    """How `predvla sweep` makes a suite's dataset before training: expert demonstrations (`predvla demos`), the
+    front end (`predvla fit-frontend`) and the conversion (`predvla convert`) into the suite's `datasets` root.
+    Each stage is skipped when its output exists (demonstrations task by task), so a killed run resumes.
+
+    Args:
+        hdf5: Root of the demonstrations (`<hdf5>/<suite>/*_demo.hdf5`).
+        frontend: Directory of the fitted front-end artefact.
+        per_task: Successful expert demonstrations per task (the paper's datasets have 50).
+        tasks: Task ids (default: every task of the suite).
+        render_interval: Render the cameras every k-th step (4 = PredVLA's visual refresh).
+        demo_seed: Seed of the randomised resets of the demonstrations.
+        vision_weights: ResNet18 weights of the front end ('imagenet', a .pth file, or 'random': the offline
+            substitute, printed as such).
+        language_from: Instructions of the language PCA: 'libero' (all 40 of the task list, Section 4.1) or 'demos'.
+        frame_stride: Fit the visual PCA on every n-th frame.
+    """
+
+    hdf5: str
+    frontend: str
+    per_task: int = 50
+    tasks: list[int] | None = None
+    render_interval: int = 4
+    demo_seed: int = 0
+    vision_weights: str = "imagenet"
+    language_from: str = "libero"
+    frame_stride: int = 4
+
+
+@dataclass(frozen=True)
+class Run:
+    config: str
+    suite: str
+    seed: int
+
+    @property
+    def key(self) -> str:
+        return f"{self.config}/{self.suite}/seed{self.seed}"
+
+
+@dataclass
+class Sweep:
+    settings: Settings
+    configs: dict[str, ConfigSpec]
+    base_dir: Path  # relative paths in the sweep file are relative to it
+
+    @classmethod
+    def load(cls, path: Path) -> "Sweep":
+        path = Path(path)
+        if not path.is_file():
+            raise SweepError(f"{path}: sweep file not found.")
+        text = path.read_text()
+        if path.suffix == ".json":
+            raw = json.loads(text)
+        else:
+            import yaml
+
+            raw = yaml.safe_load(text)
+        if not isinstance(raw, dict) or not raw.get("configs"):
+            raise SweepError(f"{path}: expected a mapping with a non-empty `configs` list.")
+        unknown = set(raw) - {"seeds", "suites", "datasets", "data", "train", "eval", "configs"}
+        if unknown:
+            raise SweepError(f"{path}: unknown top-level keys {sorted(unknown)}.")
+        train, evaluation = raw.get("train", {}), raw.get("eval", {})
+        try:
+            settings = Settings(
+                seeds=list(raw.get("seeds", [0])),
+                suites=list(raw.get("suites", SUITES)),
+                datasets=dict(raw.get("datasets", {})),
+                steps=int(train.get("steps", PAPER_TRAIN_STEPS)),
+                batch_size=int(train.get("batch_size", PAPER_BATCH_SIZE)),
+                save_freq=int(train.get("save_freq", 5_000)),
+                train_device=str(train.get("device", "cuda")),
+                train_args=list(train.get("args", [])),
+                accelerate_processes=int(train.get("accelerate_processes", 1)),
+                n_episodes=int(evaluation.get("n_episodes", PAPER_EPISODES_PER_TASK)),
+                episode_length=int(evaluation.get("episode_length", PAPER_EPISODE_LENGTH)),
+                eval_batch_size=int(evaluation.get("batch_size", 1)),
+                eval_device=str(evaluation.get("device", "cuda")),
+                env_type=str(evaluation.get("env_type", EVAL_ENV_TYPE)),
+                eval_args=list(evaluation.get("args", [])),
+                eval_tasks=[int(t) for t in evaluation["tasks"]] if "tasks" in evaluation else None,
+                data={suite: DataSpec(**spec) for suite, spec in raw.get("data", {}).items()},
+            )
+            configs = [ConfigSpec(**entry) for entry in raw["configs"]]
+        except TypeError as err:
+            raise SweepError(f"{path}: {err}") from err
+        sweep = cls(settings, {}, path.parent)
+        for spec in configs:
+            if spec.name in sweep.configs:
+                raise SweepError(f"{path}: configuration name {spec.name!r} appears twice.")
+            sweep.configs[spec.name] = spec
+        sweep.validate(path)
+        return sweep
+
+    def validate(self, where: Path) -> None:
+        for spec in self.configs.values():
+            if spec.group not in GROUPS:
+                raise SweepError(f"{where}: configuration {spec.name}: group {spec.group!r} is not one of {GROUPS}.")
+            for ref in (spec.checkpoint_from, spec.compare_to):
+                if ref is not None and ref not in self.configs:
+                    raise SweepError(f"{where}: configuration {spec.name} refers to unknown configuration {ref!r}.")
+            if spec.checkpoint_from and (spec.train_args or spec.policy_overrides or spec.suite_overrides):
+                raise SweepError(
+                    f"{where}: configuration {spec.name} evaluates {spec.checkpoint_from}'s checkpoints; "
+                    "give it eval_overrides/eval_args only."
+                )
+            if spec.checkpoint_from and self.configs[spec.checkpoint_from].checkpoint_from:
+                raise SweepError(f"{where}: configuration {spec.name}: checkpoint_from must name a trained config.")
+            if spec.corruption is not None:
+                self.validate_corruption(spec, where)
+            unknown = set(self.suites_of(spec)) - set(SUITES)
+            if unknown:
+                raise SweepError(f"{where}: configuration {spec.name}: unknown suites {sorted(unknown)}; use {SUITES}.")
+            missing = [s for s in self.suites_of(spec) if s not in self.settings.datasets]
+            if missing:
+                raise SweepError(f"{where}: `datasets` has no entry (repo_id, root) for suites {missing}.")
+        for suite in self.settings.data:
+            if not self.settings.datasets.get(suite, {}).get("root"):
+                raise SweepError(f"{where}: `data` makes {suite}'s dataset, so `datasets.{suite}` needs a `root`.")
+
+    def validate_corruption(self, spec: ConfigSpec, where: Path) -> None:
+        c = spec.corruption
+        if not isinstance(c, dict) or c.get("channel") not in ("vision", "proprio") or "alpha" not in c:
+            raise SweepError(f"{where}: configuration {spec.name}: corruption needs channel (vision or proprio) and "
+                             f"alpha, got {c!r}.")
+        unknown = sorted(set(c) - CORRUPTION_KEYS)
+        if unknown:
+            raise SweepError(f"{where}: configuration {spec.name}: unknown corruption keys {unknown}; expected "
+                             f"{sorted(CORRUPTION_KEYS)}.")
+        if not 0.0 <= float(c["alpha"]) <= 1.0:
+            raise SweepError(f"{where}: configuration {spec.name}: corruption alpha {c['alpha']} is not in [0, 1].")
+        sources = {self.corruption_source(spec, suite) for suite in self.suites_of(spec)}
+        missing = sorted(sources - set(self.settings.datasets))
+        if missing:
+            raise SweepError(f"{where}: configuration {spec.name}: the corruption source suites {missing} have no "
+                             "entry in `datasets`.")
+        remote = sorted(s for s in sources if not self.settings.datasets[s].get("root"))
+        if remote:
+            raise SweepError(f"{where}: configuration {spec.name}: the corruption source datasets of {remote} need "
+                             "a local `root`.")
+
+    @staticmethod
+    def corruption_source(spec: ConfigSpec, suite: str) -> str:
+        return spec.corruption.get("source_suite") or CORRUPTION_SOURCE[suite]
+
+    def suites_of(self, spec: ConfigSpec) -> list[str]:
+        return spec.suites or self.settings.suites
+
+    def seeds_of(self, spec: ConfigSpec) -> list[int]:
+        return spec.seeds or self.settings.seeds
+
+    def trained_config(self, spec: ConfigSpec) -> ConfigSpec:
+        return self.configs[spec.checkpoint_from] if spec.checkpoint_from else spec
+
+    def steps_of(self, spec: ConfigSpec) -> int:
+        return self.trained_config(spec).steps or self.settings.steps
+
+    def runs(self, configs: list[str] | None = None) -> list[Run]:
+        names = configs or list(self.configs)
+        unknown = [n for n in names if n not in self.configs]
+        if unknown:
+            raise SweepError(f"--configs: unknown configurations {unknown}; the sweep file has {list(self.configs)}.")
+        return [
+            Run(name, suite, seed)
+            for name in names
+            for suite in self.suites_of(self.configs[name])
+            for seed in self.seeds_of(self.configs[name])
+        ]
+
+    def units(self, runs: list[Run]) -> list[tuple[tuple[str, str, int], list[Run]]]:
+        """Runs grouped by the checkpoint they need ((trained config, suite, seed)), in a stable order."""
+        grouped: dict[tuple[str, str, int], list[Run]] = {}
+        for run in runs:
+            trained = self.trained_config(self.configs[run.config]).name
+            grouped.setdefault((trained, run.suite, run.seed), []).append(run)
+        order = {name: i for i, name in enumerate(self.configs)}
+        return sorted(grouped.items(), key=lambda item: (order[item[0][0]], SUITES.index(item[0][1]), item[0][2]))
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """"i/n" with 0 <= i < n."""
+    try:
+        index, count = (int(x) for x in text.split("/"))
+    except ValueError as err:
+        raise SweepError(f"--shard {text!r}: expected i/n, e.g. 0/4.") from err
+    if count < 1 or not 0 <= index < count:
+        raise SweepError(f"--shard {text!r}: need 0 <= i < n.")
+    return index, count
+
+
+def subprocess_executor(command: list[str], log: Path) -> int:
+    """Run a command with stdout and stderr appended to `log`."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with log.open("a") as out:
+        out.write(f"$ {' '.join(command)}\n")
+        out.flush()
+        return subprocess.run(command, stdout=out, stderr=subprocess.STDOUT, check=False).returncode
+
+
+def versions() -> dict[str, str]:
+    """Package versions, and the plugin's git commit when it runs from a checkout."""
+    found = package_versions()
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                                cwd=Path(__file__).parent, check=False).stdout.strip()
+        found["lerobot_predvla_git"] = commit or "unknown"
+    except OSError:
+        found["lerobot_predvla_git"] = "unknown"
+    return found
+
+
+@dataclass
+class Runner:
+    """Executes the runs of a sweep under `runs_dir`; `execute` is injectable (tests use a fake)."""
+
+    sweep: Sweep
+    runs_dir: Path
+    execute: Executor = subprocess_executor
+    lerobot_train: str = str(Path(sys.executable).with_name("lerobot-train"))
+    lerobot_eval: str = str(Path(sys.executable).with_name("lerobot-eval"))
+    accelerate: str = str(Path(sys.executable).with_name("accelerate"))
+    torchrun: str = str(Path(sys.executable).with_name("torchrun"))
+
+    # ----- paths --------------------------------------------------------------------------------------------
+    def train_dir(self, config: str, suite: str, seed: int) -> Path:
+        return self.runs_dir / "train" / config / suite / f"seed{seed}"
+
+    def eval_dir(self, run: Run) -> Path:
+        return self.runs_dir / "eval" / run.config / run.suite / f"seed{run.seed}"
+
+    def record_path(self, run: Run) -> Path:
+        return self.runs_dir / "records" / run.config / run.suite / f"seed{run.seed}.json"
+
+    def log_path(self, name: str, suite: str, seed: int, stage: str) -> Path:
+        return self.runs_dir / "logs" / name / suite / f"seed{seed}.{stage}.log"
+
+    # ----- commands ---------------------------------------------------------------------------------------
+    def launcher(self) -> list[str]:
+        """`lerobot-train`, or for several processes LeRobot's multi-GPU path `accelerate launch --multi_gpu`; on
+        the CPU `torchrun` (accelerate's Accelerator then runs DDP over gloo: `accelerate launch --cpu` starts one
+        process only)."""
+        procs = self.sweep.settings.accelerate_processes
+        if procs == 1:
+            return [self.lerobot_train]
+        if self.sweep.settings.train_device == "cpu":
+            return [self.torchrun, f"--nproc_per_node={procs}", self.lerobot_train]
+        return [self.accelerate, "launch", "--multi_gpu", f"--num_processes={procs}", self.lerobot_train]
+
+    def train_command(self, spec: ConfigSpec, suite: str, seed: int) -> list[str]:
+        s = self.sweep.settings
+        dataset = s.datasets[suite]
+        procs = s.accelerate_processes
+        if s.batch_size % procs:
+            raise SweepError(f"batch_size {s.batch_size} is not divisible by accelerate_processes {procs}.")
+        return [
+            *self.launcher(),
+            *spec.policy_args(self.sweep.base_dir, suite),
+            f"--dataset.repo_id={dataset['repo_id']}",
+            *([f"--dataset.root={self._path(dataset['root'])}"] if dataset.get("root") else []),
+            f"--output_dir={self.train_dir(spec.name, suite, seed)}",
+            f"--job_name={spec.name}_{suite}_seed{seed}",
+            f"--seed={seed}",
+            f"--steps={self.sweep.steps_of(spec)}",
+            f"--batch_size={s.batch_size // procs}",  # per process: the effective batch stays batch_size
+            f"--save_freq={s.save_freq}",
+            f"--policy.device={s.train_device}",
+            "--policy.push_to_hub=false",
+            "--wandb.enable=false",
+            *s.train_args,
+            *spec.train_args,
+        ]
+
+    def resume_command(self, train_dir: Path) -> list[str]:
+        config = last_pretrained(train_dir) / "train_config.json"
+        return [*self.launcher(), f"--config_path={config}", "--resume=true"]
+
+    def eval_command(self, run: Run, checkpoint: Path) -> list[str]:
+        s = self.sweep.settings
+        spec = self.sweep.configs[run.config]
+        return [
+            self.lerobot_eval,
+            f"--policy.path={checkpoint}",
+            f"--policy.device={s.eval_device}",
+            *_as_args(spec.eval_overrides, "policy"),
+            *self.corruption_args(spec, run.suite),
+            f"--env.type={s.env_type}",
+            f"--env.task={run.suite}",
+            f"--env.episode_length={s.episode_length}",
+            "--env.init_states=true",
+            f"--eval.n_episodes={spec.n_episodes or s.n_episodes}",
+            f"--eval.batch_size={s.eval_batch_size}",
+            "--eval.use_async_envs=false",
+            f"--seed={run.seed}",
+            f"--output_dir={self.eval_dir(run)}",
+            *s.eval_args,
+            *spec.eval_args,
+        ]
+
+    def corruption_args(self, spec: ConfigSpec, suite: str) -> list[str]:
+        """`--policy.er_corruption_*` for a corruption point: the unrelated episode from the source suite's dataset."""
+        if spec.corruption is None:
+            return []
+        source = self.sweep.settings.datasets[self.sweep.corruption_source(spec, suite)]
+        return _as_args({
+            "er_corruption_channel": spec.corruption["channel"],
+            "er_corruption_alpha": float(spec.corruption["alpha"]),
+            "er_corruption_root": str(self._path(source["root"])),
+            "er_corruption_episode": int(spec.corruption.get("episode", 0)),
+        }, "policy")
+
+    def _path(self, value: str) -> Path:
+        path = Path(value)
+        return path if path.is_absolute() else (self.sweep.base_dir / path).resolve()
+
+    # ----- data ------------------------------------------------------------------------------------------
+    def data_commands(self, suite: str) -> list[tuple[str, list[str]]]:
+        """(stage, command) still to run to make `suite`'s dataset; empty when it exists or has no `data` entry."""
+        spec = self.sweep.settings.data.get(suite)
+        if spec is None:
+            return []
+        dataset = self._path(self.sweep.settings.datasets[suite]["root"])
+        if (dataset / "meta" / "info.json").is_file():
+            return []
+        hdf5, frontend = self._path(spec.hdf5), self._path(spec.frontend)
+        predvla = [sys.executable, "-m", "lerobot_predvla.cli.main"]
+        commands = []
+        missing = self.missing_demo_tasks(suite, spec, hdf5)
+        if missing:
+            commands.append(("demos", [*predvla, "demos", "--suite", suite, "--tasks", ",".join(map(str, missing)),
+                                       "--per-task", str(spec.per_task), "--render-interval", str(spec.render_interval),
+                                       "--seed", str(spec.demo_seed), "--out", str(hdf5)]))
+        if not (frontend / "metadata.json").is_file():
+            commands.append(("frontend", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", suite,
+                                          "--vision-weights", spec.vision_weights, "--language-from",
+                                          spec.language_from, "--frame-stride", str(spec.frame_stride),
+                                          "--out", str(frontend)]))
+        commands.append(("convert", [*predvla, "convert", "--hdf5-root", str(hdf5), "--suite", suite,
+                                     "--frontend", str(frontend), "--out", str(dataset),
+                                     "--repo-id", self.sweep.settings.datasets[suite]["repo_id"]]))
+        return commands
+
+    @staticmethod
+    def missing_demo_tasks(suite: str, spec: DataSpec, hdf5: Path) -> list[int]:
+        from lerobot_predvla.libero.env import num_tasks, task_spec
+        from lerobot_predvla.data.hdf5_layout import task_file
+
+        tasks = spec.tasks if spec.tasks is not None else range(num_tasks(suite))
+        return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]
+
+    def make_data(self, suite: str) -> bool:
+        """Run the missing data stages of `suite`, recording each one's command and wall time in
+        `RUNS_DIR/data/<suite>.json`; False when one failed."""
+        stages_file = self.runs_dir / "data" / f"{suite}.json"
+        for stage, command in self.data_commands(suite):
+            start = time.monotonic()
+            code = self.execute(command, self.log_path("data", suite, 0, stage))
+            if code != 0:
+                print(f"predvla sweep: data stage {stage} of {suite} failed (exit {code}); see "
+                      f"{self.log_path('data', suite, 0, stage)}", file=sys.stderr)
+                return False
+            stages = json.loads(stages_file.read_text()) if stages_file.is_file() else {}
+            stages[stage] = {"command": command, "wall_s": round(time.monotonic() - start, 1)}
+            atomic_write_json(stages_file, stages)
+        return True
+
+    # ----- running ----------------------------------------------------------------------------------------
+    def write_plan(self, runs: list[Run]) -> None:
+        """`plan.json`: every run of the sweep and its configuration, so the report can mark missing runs."""
+        atomic_write_json(self.runs_dir / "plan.json", {
+            "runs": [asdict(r) for r in runs],
+            "configs": {name: asdict(spec) for name, spec in self.sweep.configs.items()},
+            "protocol": {"n_episodes": self.sweep.settings.n_episodes,
+                         "episode_length": self.sweep.settings.episode_length},
+        })
+
+    def shard_units(
+        self, configs: list[str] | None, shard: tuple[int, int]
+    ) -> list[tuple[tuple[str, str, int], list[Run]]]:
+        """This shard's training units: every n-th checkpoint, with all runs that evaluate it."""
+        return [u for i, u in enumerate(self.sweep.units(self.sweep.runs(configs))) if i % shard[1] == shard[0]]
+
+    def pending_commands(self, configs: list[str] | None, shard: tuple[int, int]) -> list[list[str]]:
+        """The commands `run` would start now (for --dry-run); a resumed training shows its resume command."""
+        commands, data_done = [], set()
+        for (trained, suite, seed), unit_runs in self.shard_units(configs, shard):
+            pending = [r for r in unit_runs if not self.record_path(r).is_file()]
+            if not pending:
+                continue
+            out = self.train_dir(trained, suite, seed)
+            if suite not in data_done and not (out / TRAIN_DONE_FILE).is_file():
+                commands += [command for _, command in self.data_commands(suite)]
+                data_done.add(suite)
+            if (out / TRAIN_DONE_FILE).is_file():
+                checkpoint = self.trained_checkpoint(json.loads((out / TRAIN_DONE_FILE).read_text()))
+            elif (last_pretrained(out) / "train_config.json").is_file():
+                commands.append(self.resume_command(out))
+                checkpoint = last_pretrained(out)
+            else:
+                commands.append(self.train_command(self.sweep.configs[trained], suite, seed))
+                checkpoint = last_pretrained(out)
+            commands += [command for run in pending for command in self.pending_eval_commands(run, checkpoint)]
+        return commands
+
+    def run(
+        self, configs: list[str] | None = None, shard: tuple[int, int] = (0, 1), progress: bool = True
+    ) -> dict[str, list[str]]:
+        """Run (or skip) this shard's runs. Returns run keys by outcome: done, skipped, failed."""
+        from tqdm import tqdm
+
+        self.write_plan(self.sweep.runs())
+        units = self.shard_units(configs, shard)
+        outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": []}
+        bar = tqdm(total=sum(len(r) for _, r in units), desc=f"sweep shard {shard[0]}/{shard[1]}", disable=not progress)
+        for (trained, suite, seed), unit_runs in units:
+            pending = [r for r in unit_runs if not self.record_path(r).is_file()]
+            outcome["skipped"] += [r.key for r in unit_runs if r not in pending]
+            bar.update(len(unit_runs) - len(pending))
+            if not pending:
+                continue
+            trained_spec = self.sweep.configs[trained]
+            train_result = self.train(trained_spec, suite, seed)
+            for run in pending:
+                bar.set_postfix_str(run.key)
+                ok = train_result is not None and self.evaluate(run, train_result)
+                outcome["done" if ok else "failed"].append(run.key)
+                bar.update(1)
+        bar.close()
+        return outcome
+
+    def trained_checkpoint(self, trained: dict) -> Path:
+        """The checkpoint of a finished training (`TRAIN_DONE_FILE`), kept relative to RUNS_DIR so that a sweep
+        directory moved to another machine, or pointed at a committed checkpoint, still finds it."""
+        return (self.runs_dir / trained["checkpoint"]).resolve()
+
+    def train(self, spec: ConfigSpec, suite: str, seed: int) -> dict | None:
+        """Train (or resume, or reuse) one checkpoint; None when lerobot-train failed."""
+        out = self.train_dir(spec.name, suite, seed)
+        done = out / TRAIN_DONE_FILE
+        if done.is_file():
+            return json.loads(done.read_text())
+        if not self.make_data(suite):  # the dataset is needed only to train: evaluations never read it
+            return None
+        last = last_pretrained(out)
+        if (last / "train_config.json").is_file():
+            command, resumed = self.resume_command(out), True
+        else:
+            shutil.rmtree(out, ignore_errors=True)  # started but no checkpoint yet: lerobot-train needs a new dir
+            command, resumed = self.train_command(spec, suite, seed), False
+        start = time.monotonic()
+        code = self.execute(command, self.log_path(spec.name, suite, seed, "train"))
+        if code != 0 or not (last / "model.safetensors").is_file():
+            print(f"predvla sweep: training {spec.name}/{suite}/seed{seed} failed (exit {code}); see "
+                  f"{self.log_path(spec.name, suite, seed, 'train')}", file=sys.stderr)
+            return None
+        result = {
+            "checkpoint": os.path.relpath(last.resolve(), self.runs_dir.resolve()),
+            "steps": self.sweep.steps_of(spec),
+            "parameters": count_parameters(last / "model.safetensors"),
+            "train_wall_s": round(time.monotonic() - start, 1),
+            "resumed": resumed,
+            "command": command,
+        }
+        atomic_write_json(done, result)
+        return result
+
+    def eval_parts(self, run: Run) -> list[tuple[Path, list[str]]]:
+        """(output directory, extra lerobot-eval arguments) of each part of a run's evaluation: the whole suite
+        at once, or one part per task with `eval.tasks`, each finished part kept when the run is redone."""
+        out = self.eval_dir(run)
+        tasks = self.sweep.settings.eval_tasks
+        if tasks is None:
+            return [(out, [])]
+        return [(out / f"task{t}", [f"--env.task_ids=[{t}]"]) for t in tasks]
+
+    def part_command(self, run: Run, checkpoint: Path, out: Path, extra: list[str]) -> list[str]:
+        command = [*self.eval_command(run, checkpoint), *extra]
+        command[command.index(f"--output_dir={self.eval_dir(run)}")] = f"--output_dir={out}"
+        return command
+
+    def pending_eval_commands(self, run: Run, checkpoint: Path) -> list[list[str]]:
+        return [self.part_command(run, checkpoint, out, extra) for out, extra in self.eval_parts(run)
+                if not (out / EVAL_INFO_FILE).is_file()]
+
+    def evaluate(self, run: Run, trained: dict) -> bool:
+        spec = self.sweep.configs[run.config]
+        tasks, commands, wall = {}, [], 0.0
+        for out, extra in self.eval_parts(run):
+            info = out / EVAL_INFO_FILE
+            command = self.part_command(run, self.trained_checkpoint(trained), out, extra)
+            commands.append(command)
+            start = time.monotonic()
+            if not info.is_file():
+                shutil.rmtree(out, ignore_errors=True)  # a killed evaluation is redone from scratch
+                code = self.execute(command, self.log_path(run.config, run.suite, run.seed, "eval"))
+                if code != 0 or not info.is_file():
+                    print(f"predvla sweep: evaluation {run.key} failed (exit {code}); see "
+                          f"{self.log_path(run.config, run.suite, run.seed, 'eval')}", file=sys.stderr)
+                    return False
+                atomic_write_json(out / EVAL_WALL_FILE, {"eval_wall_s": round(time.monotonic() - start, 1)})
+            try:
+                tasks.update(parse_eval_info(info))
+            except EvalInfoError as err:
+                raise SweepError(str(err)) from err
+            wall_file = out / EVAL_WALL_FILE
+            wall += json.loads(wall_file.read_text())["eval_wall_s"] if wall_file.is_file() else 0.0
+        tasks = dict(sorted(tasks.items(), key=lambda kv: int(kv[0])))
+        command = commands[0] if len(commands) == 1 else commands
+        successes = sum(t["successes"] for t in tasks.values())
+        episodes = sum(t["episodes"] for t in tasks.values())
+        record = {
+            "config": run.config,
+            "group": spec.group,
+            "label": spec.label,
+            "compare_to": spec.compare_to,
+            "branch": spec.branch,
+            "corruption": spec.corruption,
+            "eval_overrides": spec.eval_overrides,
+            "checkpoint_from": spec.checkpoint_from,
+            "suite": run.suite,
+            "seed": run.seed,
+            "steps": trained["steps"],
+            "parameters": trained["parameters"],
+            "tasks": tasks,
+            "successes": successes,
+            "episodes": episodes,
+            "success_rate": 100.0 * successes / episodes,
+            "n_episodes_per_task": spec.n_episodes or self.sweep.settings.n_episodes,
+            "episode_length": self.sweep.settings.episode_length,
+            "train_wall_s": trained["train_wall_s"],
+            "eval_wall_s": round(wall, 1),
+            "checkpoint": trained["checkpoint"],
+            "commands": {"train": trained["command"], "eval": command},
+            "versions": versions(),
+            "finished": datetime.now(UTC).isoformat(timespec="seconds"),
+        }
+        atomic_write_json(self.record_path(run), record)
+        return True

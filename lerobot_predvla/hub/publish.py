@@ -1,0 +1,453 @@
+"""Publishing PredVLA checkpoints on the Hugging Face Hub with the model card of `hub/predvla_card.md`.
+
+Two routes end in `upload_files` (one `HfApi.create_commit`):
+- `lerobot-train ... --policy.push_to_hub=true --policy.repo_id=...`: `PredVLAPolicy.push_model_to_hub` calls
+  `push_trained_policy` at the end of training (LeRobot then pushes the processors in their own commits);
+- `predvla push CHECKPOINT_DIR REPO_ID`: `push_checkpoint` publishes a saved checkpoint in one commit.
+
+What is published: `config.json`, `model.safetensors`, `train_config.json`, the processors
+(`policy_preprocessor*.json/.safetensors`, `policy_postprocessor*`, which carry the front-end artefact), the
+artefact itself as `predvla_frontend/` when available, and `README.md` (the card). Never the training
+posteriors (`posterior_store.safetensors`) nor `training_state/` (optimizer, scheduler, RNG).
+"""
+
+import dataclasses
+import importlib.metadata
+import importlib.resources
+import json
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass
+from fnmatch import fnmatch
+from pathlib import Path
+from string import Template
+
+from huggingface_hub import CommitOperationAdd, HfApi
+from lerobot.configs import PreTrainedConfig
+
+from lerobot_predvla.experiments.report import load_summary
+from lerobot_predvla.frontend.artefact import METADATA_FILE, TENSORS_FILE
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from lerobot_predvla.policies import POLICY_TYPES
+from lerobot_predvla.policies.common.cached_features import FRONTEND_META_DIR
+from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PREDICTIVE_RUNGS
+from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
+from lerobot_predvla.utils.checkpoints import REQUIRED_FILES, find_pretrained
+from lerobot_predvla.utils.parameters import count_parameters
+from lerobot_predvla.utils.versions import package_version
+
+# Package data of lerobot_predvla.hub (pyproject package-data), read with importlib.resources.
+CARD_TEMPLATE = importlib.resources.files("lerobot_predvla.hub") / "predvla_card.md"
+CARD_FILE = "README.md"
+FRONTEND_DIR = "predvla_frontend"  # the artefact's folder inside a checkpoint and a Hub repo
+PUSH_PATTERNS = ("*.safetensors", "*.json", "*.yaml", "*.md")  # what LeRobot's own push uploads
+NEVER_PUSHED = (POSTERIOR_STORE_FILE,)
+TAGS = ("robotics", "lerobot", "predvla", "libero")
+PREDICTIVE_TAG = "predictive-coding"  # PredVLA and the ladder rungs that keep its predictive network
+# Frozen encoders (counted once: torchvision resnet18 without `fc`; sentence-transformers all-MiniLM-L6-v2).
+RESNET18_BACKBONE_PARAMS = 11_176_512
+MINILM_PARAMS = 22_713_216
+FRONTEND_STEP = "predvla_frontend_processor"
+_LEFTOVER = re.compile(r"\$\{?[A-Za-z_][A-Za-z0-9_]*\}?|\{\{|\}\}")
+_FEATURE_MEANING = {
+    "observation.vision_features": "ResNet18 features of both cameras, PCA per camera (cached or computed by the "
+    "front end)",
+    "observation.language_features": "all-MiniLM-L6-v2 instruction embedding, PCA",
+    "observation.state": "proprioception: joint positions (7) + gripper (2)",
+    "action": "delta end-effector action (LIBERO, 7)",
+}
+
+
+class HubError(ValueError):
+    """A checkpoint or input that cannot be published as asked."""
+
+
+# ----- files ---------------------------------------------------------------------------------------------
+def pretrained_dir(checkpoint: Path) -> Path:
+    """The `pretrained_model` directory of a checkpoint (or the directory itself when it holds the weights)."""
+    found = find_pretrained(checkpoint)
+    if found is not None:
+        return found
+    raise HubError(
+        f"{checkpoint}: not a checkpoint; expected {' and '.join(REQUIRED_FILES)} in it or in its "
+        "pretrained_model/ (e.g. outputs/RUN/checkpoints/last)."
+    )
+
+
+def publishable_files(directory: Path) -> dict[str, Path]:
+    """Files of a saved policy that go to the Hub, keyed by their path in the repository."""
+    files = {}
+    for path in sorted(Path(directory).rglob("*")):
+        rel = path.relative_to(directory).as_posix()
+        if (
+            path.is_file()
+            and any(fnmatch(path.name, pattern) for pattern in PUSH_PATTERNS)
+            and path.name not in NEVER_PUSHED
+            and not any(part.startswith(".") for part in Path(rel).parts)  # temporary files of atomic writes
+            and not rel.startswith("training_state/")
+        ):
+            files[rel] = path
+    return files
+
+
+def frontend_source(pretrained: Path, dataset_root: Path | None, override: Path | None) -> Path | None:
+    """The artefact directory to publish: `override`, the checkpoint's own copy, or the dataset's copy."""
+    if override is not None:
+        if not (override / METADATA_FILE).is_file() or not (override / TENSORS_FILE).is_file():
+            raise HubError(f"--frontend {override}: expected {METADATA_FILE} and {TENSORS_FILE} in it.")
+        return override
+    for candidate in (pretrained / FRONTEND_DIR, dataset_root / FRONTEND_META_DIR if dataset_root else None):
+        if candidate is not None and (candidate / METADATA_FILE).is_file() and (candidate / TENSORS_FILE).is_file():
+            return candidate
+    return None
+
+
+def frontend_metadata(files: dict[str, Path]) -> dict | None:
+    """The artefact's `frontend.json`, from the published folder or from the preprocessor's front-end step."""
+    if f"{FRONTEND_DIR}/{METADATA_FILE}" in files:
+        return json.loads(files[f"{FRONTEND_DIR}/{METADATA_FILE}"].read_text())
+    if "policy_preprocessor.json" in files:
+        for step in json.loads(files["policy_preprocessor.json"].read_text()).get("steps", []):
+            if step.get("registry_name") == FRONTEND_STEP and step.get("config", {}).get("artefact"):
+                return step["config"]["artefact"]
+    return None
+
+
+# ----- model card ------------------------------------------------------------------------------------------
+@dataclass
+class DatasetSummary:
+    repo_id: str
+    episodes: int
+    frames: int
+    fps: int
+    tasks: list[str]
+
+    @classmethod
+    def from_meta(cls, meta) -> "DatasetSummary":
+        return cls(meta.repo_id, meta.total_episodes, meta.total_frames, meta.fps, [str(t) for t in meta.tasks.index])
+
+    @classmethod
+    def from_root(cls, repo_id: str, root: Path) -> "DatasetSummary | None":
+        """Read `meta/info.json` and `meta/tasks.parquet` of a local dataset; None when it is not here."""
+        info = Path(root) / "meta" / "info.json"
+        if not info.is_file():
+            return None
+        from lerobot.datasets import LeRobotDatasetMetadata
+
+        return cls.from_meta(LeRobotDatasetMetadata(repo_id, root=root))
+
+
+def _format_value(value) -> str:
+    if isinstance(value, list | tuple):
+        return "(" + ", ".join(_format_value(v) for v in value) + ")"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return f"`{value}`" if isinstance(value, str) else str(value)
+
+
+def _suite_of(dataset_repo_id: str) -> str | None:
+    return next((s for s in sorted(SUITES, key=len, reverse=True) if s in dataset_repo_id), None)
+
+
+def eval_command(repo_id: str, suite: str) -> str:
+    return (
+        f"lerobot-eval --policy.path={repo_id} --env.type={EVAL_ENV_TYPE} --env.task={suite} "
+        f"--env.episode_length={PAPER_EPISODE_LENGTH} --eval.n_episodes={PAPER_EPISODES_PER_TASK} "
+        "--eval.batch_size=1 --eval.use_async_envs=false --policy.device=cuda --output_dir=outputs/eval"
+    )
+
+
+def _frontend_section(meta: dict | None) -> tuple[str, str]:
+    """(Markdown description, number of PCA values) of the artefact."""
+    if meta is None:
+        return (
+            "This checkpoint carries no front-end artefact: it was trained on data without one and consumes the "
+            "cached feature columns (`observation.vision_features`, `observation.language_features`) only. It "
+            "cannot act from camera images and instructions directly.",
+            "0",
+        )
+    language, vision = meta["language"], meta["vision"]
+    cams = vision["cameras"]
+    pca_values = language["n_components"] * language["input_dim"] + language["input_dim"] + sum(
+        c["n_components"] * c["input_dim"] + c["input_dim"] for c in cams.values()
+    )
+    fit = meta.get("fit", {})
+    lines = [
+        "The frozen front end turns camera images and the instruction into the features the policy predicts. It is "
+        f"published with the weights (`{FRONTEND_DIR}/` when present, and inside the preprocessor's "
+        "`predvla_frontend_processor` step), so `lerobot-eval` recomputes exactly the training features.",
+        "",
+        "| part | value |",
+        "|---|---|",
+        f"| image encoder | {vision['encoder']}, weights: {vision.get('weights_description', vision['weights'])} |",
+        f"| image weights SHA-256 | `{vision['fingerprint_sha256']}` |",
+        f"| image precision | {vision['precision']} |",
+        f"| cameras | {', '.join(f'`{k}`' for k in cams)} |",
+        f"| image PCA | {', '.join(f'{c['input_dim']} -> {c['n_components']}' for c in cams.values())} per camera |",
+        f"| language encoder | {language['encoder']} (from {language['source']}) |",
+        f"| language PCA | {language['input_dim']} -> {language['n_components']} "
+        f"({language['components_with_variance']} components with variance) |",
+        f"| fitted on | {_format_fit(fit)} |",
+    ]
+    return "\n".join(lines), f"{pca_values:,}"
+
+
+def _format_fit(fit: dict) -> str:
+    if not fit:
+        return "not recorded"
+    keys = ("suites", "demonstrations", "frames", "instructions")
+    parts = [f"{k}: {', '.join(map(str, v)) if isinstance(v, list) else v}" for k in keys if (v := fit.get(k))]
+    return "; ".join(parts) or "not recorded"
+
+
+def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None) -> str:
+    lines = []
+    if dataset is not None:
+        tasks = "; ".join(dataset.tasks[:12]) + ("; ..." if len(dataset.tasks) > 12 else "")
+        lines += [
+            "| | |",
+            "|---|---|",
+            f"| dataset | `{dataset.repo_id}` |",
+            f"| episodes | {dataset.episodes:,} |",
+            f"| frames | {dataset.frames:,} ({dataset.fps} fps) |",
+            f"| tasks | {len(dataset.tasks)}: {tasks} |",
+        ]
+    elif train_cfg is not None:
+        lines.append(f"Dataset `{train_cfg['dataset']['repo_id']}` (its metadata was not available when publishing).")
+    else:
+        lines.append("The training dataset was not recorded with this checkpoint.")
+    if train_cfg is not None:
+        lines += [
+            "",
+            f"Trained for {train_cfg['steps']:,} steps, batch size {train_cfg['batch_size']}, "
+            f"seed {train_cfg['seed']}.",
+        ]
+    return "\n".join(lines)
+
+
+def _results_section(report: Path | None, config_name: str | None) -> str:
+    if report is None:
+        return "No evaluation results were attached when publishing (`predvla push --results REPORT_DIR`)."
+    summary = load_summary(report)
+    names = list(summary["configs"])
+    name = config_name or ("predvla" if "predvla" in names else names[0] if len(names) == 1 else None)
+    if name not in summary["configs"]:
+        raise HubError(f"{report}: choose the configuration with --results-config; the report has {names}.")
+    entry = summary["configs"][name]
+    lines = [
+        f"Success rate (%) on LIBERO, configuration `{name}`, mean +/- standard deviation across seeds "
+        f"(from `predvla report`; {summary['protocol']}).",
+        "",
+        "| suite | success (%) | seeds |",
+        "|---|---|---|",
+    ]
+    for suite, cell in entry["suites"].items():
+        value = f"{cell['mean']:.2f} +/- {cell['std']:.2f}" if cell["n"] else "not run"
+        lines.append(f"| {suite} | {value} | {cell['n']} |")
+    for key, label in (("mean3", "3-suite mean"), ("mean4", "4-suite mean")):
+        if entry.get(key) is not None:
+            lines.append(f"| {label} | {entry[key]:.2f} | |")
+    return "\n".join(lines)
+
+
+def _policy_type(config: dict, where: Path) -> str:
+    """The checkpoint's policy type, which must be one of this plugin's (else one clear line)."""
+    policy_type = config.get("type")
+    if policy_type not in POLICY_TYPES:
+        raise HubError(
+            f"{where}: policy type {policy_type!r} is not one of this plugin's ({', '.join(POLICY_TYPES)}); "
+            "publish it with LeRobot's own push_to_hub."
+        )
+    return policy_type
+
+
+def _model_section(config: dict) -> dict[str, str]:
+    """Title, description and the type-specific lines of the card, for each policy type of the plugin."""
+    policy_type = config["type"]
+    config_cls = PreTrainedConfig.get_choice_class(policy_type)
+    values = {
+        "policy_type": policy_type,
+        "policy_class": config_cls.__name__.removesuffix("Config") + "Policy",
+        "posterior_note": "",
+        "er_limitation": "",
+    }
+    shared = (
+        "It reads the cached features of PredVLA's frozen front end and decodes a Gaussian-mixture action with "
+        "PredVLA's head, trained on the same data."
+    )
+    if policy_type == "predvla":
+        values["model_title"] = "PredVLA"
+        values["model_description"] = (
+            "PredVLA is a language-conditioned **predictive-coding** policy for robot manipulation (paper: *PredVLA: "
+            "Predictive Sensorimotor Modeling for Sub-Million-Parameter Robot Manipulation*). A hierarchical recurrent "
+            "network of four modules (task T, vision V, upper and lower action A) with time constants "
+            f"{_format_value(config['tau'])} predicts visual features and proprioception and outputs a "
+            "Gaussian-mixture action. Observations never enter the network as inputs: at every control step, *error "
+            f"regression* adjusts the latent posteriors of the last {config['er_window']} steps by "
+            f"{config['er_iterations']} Adam iterations (step {_format_value(config['er_lr'])}) to minimise the free "
+            "energy of the prediction errors, and the action is decoded from the corrected state. Language "
+            "conditions the top module."
+        )
+        values["posterior_note"] = (
+            "Training posteriors (one latent per demonstration, step and module) are optimised during training only "
+            "and are not part of this repository."
+        )
+        values["er_limitation"] = (
+            f"- Error regression runs {config['er_iterations']} optimiser iterations per control step; its cost "
+            f"grows with the window ({config['er_window']} steps).\n"
+        )
+    elif policy_type == "predvla_ladder":
+        values["model_title"] = f"PredVLA ladder rung {config['rung']}"
+        values["model_description"] = (
+            f"Rung {config['rung']} of the paper's mechanism ladder from PredVLA to BC-RNN (Section 4.5): PredVLA with "
+            "part of its mechanism removed (no free variables or error regression from L2 on; observations as "
+            f"inputs from L3; no temporal hierarchy from L4; LSTM cells at L5). {shared}"
+        )
+    elif policy_type == "predvla_bc_rnn":
+        values["model_title"] = "BC-RNN baseline"
+        values["model_description"] = (
+            "The paper's BC-RNN baseline (B2): an LSTM over held visual features, proprioception and the instruction "
+            f"embedding, trained by behaviour cloning. {shared}"
+        )
+    else:
+        values["model_title"] = f"BC-Transformer baseline (chunk {config['chunk_size']})"
+        values["model_description"] = (
+            "The paper's BC-Transformer baseline (B1, B3, B4 by action chunk size): a causal Transformer over a window "
+            f"of held visual features, proprioception and the instruction embedding, trained by behaviour cloning. "
+            f"{shared}"
+        )
+    return values
+
+
+def render_card(
+    files: dict[str, Path],
+    repo_id: str,
+    dataset: DatasetSummary | None = None,
+    report: Path | None = None,
+    report_config: str | None = None,
+) -> str:
+    """The model card for the files about to be published, with every value filled in."""
+    config = json.loads(files["config.json"].read_text())
+    train_cfg = json.loads(files["train_config.json"].read_text()) if "train_config.json" in files else None
+    dataset_repo_id = dataset.repo_id if dataset else (train_cfg["dataset"]["repo_id"] if train_cfg else "unknown")
+    frontend_section, pca_values = _frontend_section(frontend_metadata(files))
+    _policy_type(config, files["config.json"])
+    model = _model_section(config)
+    lerobot_fields = {f.name for f in dataclasses.fields(PreTrainedConfig)}
+    config_cls = PreTrainedConfig.get_choice_class(config["type"])
+    own_fields = [f.name for f in dataclasses.fields(config_cls) if f.name not in lerobot_fields]
+    features = {**config.get("input_features", {}), **config.get("output_features", {})}
+    is_predictive = config["type"] == "predvla" or config.get("rung") in PREDICTIVE_RUNGS
+    values = {
+        "license": config.get("license") or "apache-2.0",
+        "dataset_repo_id": dataset_repo_id,
+        "tags_yaml": "\n".join(f"- {tag}" for tag in (*TAGS, *([PREDICTIVE_TAG] * is_predictive))),
+        "repo_id": repo_id,
+        **model,
+        "lerobot_version": package_version("lerobot"),
+        "plugin_version": package_version("lerobot_policy_predvla"),
+        "trainable_params": f"{count_parameters(files['model.safetensors']):,}",
+        "resnet_params": f"{RESNET18_BACKBONE_PARAMS:,}",
+        "minilm_params": f"{MINILM_PARAMS:,}",
+        "pca_values": pca_values,
+        "io_rows": "\n".join(
+            f"| `{key}` | {tuple(ft['shape'])} | {_FEATURE_MEANING.get(key, ft['type'].lower())} |"
+            for key, ft in features.items()
+        ),
+        "frontend_section": frontend_section,
+        "training_section": _training_section(dataset, train_cfg),
+        "config_rows": "\n".join(f"| `{k}` | {_format_value(config[k])} |" for k in own_fields if k in config),
+        "eval_command": eval_command(repo_id, _suite_of(dataset_repo_id) or "libero_object"),
+        "episodes_per_task": str(PAPER_EPISODES_PER_TASK),
+        "episode_length": str(PAPER_EPISODE_LENGTH),
+        "results_section": _results_section(report, report_config),
+        "extra_limitations": "" if _suite_of(dataset_repo_id) else (
+            f"- The training dataset `{dataset_repo_id}` is not a LIBERO suite: the evaluation command above is "
+            "only the protocol's form."
+        ),
+    }
+    if not CARD_TEMPLATE.is_file():
+        raise HubError(f"{CARD_TEMPLATE}: model card template missing (reinstall lerobot_policy_predvla).")
+    card = Template(CARD_TEMPLATE.read_text()).substitute(values)
+    leftover = _LEFTOVER.findall(card)
+    if leftover:
+        raise HubError(f"{CARD_TEMPLATE}: placeholders left after rendering: {sorted(set(leftover))}.")
+    return card
+
+
+# ----- upload ----------------------------------------------------------------------------------------------
+def upload_files(
+    files: dict[str, Path | bytes], repo_id: str, private: bool | None, commit_message: str, token: str | None = None
+) -> str:
+    """Create the model repository if needed and commit `files` to it; returns the commit URL."""
+    api = HfApi(token=token)
+    repo_id = api.create_repo(repo_id=repo_id, repo_type="model", private=private, exist_ok=True).repo_id
+    operations = [
+        CommitOperationAdd(path_in_repo=rel, path_or_fileobj=src if isinstance(src, bytes) else str(src))
+        for rel, src in sorted(files.items())
+    ]
+    info = api.create_commit(repo_id=repo_id, repo_type="model", operations=operations, commit_message=commit_message)
+    return info.commit_url
+
+
+def collect_checkpoint(checkpoint: Path, frontend: Path | None = None) -> tuple[dict[str, Path], Path | None]:
+    """Files to publish from a saved checkpoint, and the training dataset root recorded in it (if any)."""
+    pretrained = pretrained_dir(checkpoint)
+    files = publishable_files(pretrained)
+    dataset_root = None
+    if "train_config.json" in files:
+        root = json.loads(files["train_config.json"].read_text())["dataset"].get("root")
+        dataset_root = Path(root) if root else None
+    source = frontend_source(pretrained, dataset_root, frontend)
+    if source is not None:
+        files = {k: v for k, v in files.items() if not k.startswith(f"{FRONTEND_DIR}/")}
+        files.update({f"{FRONTEND_DIR}/{name}": source / name for name in (METADATA_FILE, TENSORS_FILE)})
+    return files, dataset_root
+
+
+def push_checkpoint(
+    checkpoint: Path,
+    repo_id: str,
+    *,
+    private: bool | None = None,
+    frontend: Path | None = None,
+    report: Path | None = None,
+    report_config: str | None = None,
+    dry_run: bool = False,
+) -> tuple[dict[str, Path | bytes], str | None]:
+    """Publish a saved checkpoint with its card in one commit. Returns the files and the commit URL."""
+    files, dataset_root = collect_checkpoint(checkpoint, frontend)
+    _policy_type(json.loads(files["config.json"].read_text()), files["config.json"])
+    dataset = None
+    if dataset_root is not None and "train_config.json" in files:
+        repo = json.loads(files["train_config.json"].read_text())["dataset"]["repo_id"]
+        dataset = DatasetSummary.from_root(repo, dataset_root)
+    card = render_card(files, repo_id, dataset, report, report_config)
+    published: dict[str, Path | bytes] = {**files, CARD_FILE: card.encode()}
+    if dry_run:
+        return published, None
+    return published, upload_files(published, repo_id, private, "Upload PredVLA policy, processors, front end, card")
+
+
+def push_policy(
+    policy, repo_id: str, *, cfg=None, state_dict=None, dataset_meta=None, private: bool | None = None
+) -> str:
+    """Publish an in-memory policy: the network (no posteriors), train config when given, artefact and card.
+
+    `lerobot-train --policy.push_to_hub=true` reaches this through `PredVLAPolicy.push_model_to_hub` (with the
+    train config and dataset metadata), `policy.push_to_hub(repo_id)` without them.
+    """
+    with tempfile.TemporaryDirectory() as tmp:
+        stage = Path(tmp)
+        policy.save_pretrained(stage, state_dict=state_dict)
+        if cfg is not None:
+            cfg.save_pretrained(stage)
+        root = Path(dataset_meta.root) if dataset_meta is not None else None
+        source = frontend_source(stage, root, None)
+        if source is not None and source != stage / FRONTEND_DIR:
+            shutil.copytree(source, stage / FRONTEND_DIR, ignore=shutil.ignore_patterns(".*"))
+        files = publishable_files(stage)
+        dataset = DatasetSummary.from_meta(dataset_meta) if dataset_meta is not None else None
+        published = {**files, CARD_FILE: render_card(files, repo_id, dataset).encode()}
+        return upload_files(published, repo_id, private, "Upload PredVLA policy weights, train config, front end, card")

@@ -1,0 +1,158 @@
+"""The configuration every policy of this plugin shares: inputs are the cached front-end features.
+
+PredVLA (`predvla`, `predvla_ladder`) and the observation-driven baselines (`predvla_bc_rnn`,
+`predvla_bc_transformer`) read the same columns that `predvla convert` writes (Sections 3.1, 4.1), decode
+actions with the same Gaussian-mixture head and train on whole episodes held in memory.
+"""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lerobot.configs import PreTrainedConfig
+from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
+from lerobot.optim.optimizers import AdamConfig
+from lerobot.utils.constants import ACTION, OBS_STATE
+
+# Cached front-end columns written by the converter (`predvla convert`).
+OBS_VISION_FEATURES = "observation.vision_features"
+OBS_LANGUAGE_FEATURES = "observation.language_features"
+FRONTEND_META_DIR = "meta/predvla_frontend"  # the front-end artefact copy a converted dataset carries
+
+
+def cached_feature_normalization() -> dict[str, NormalizationMode]:
+    """Features are PCA outputs and raw proprioception (Section 3.1): identity. Actions are min-max scaled to
+    [-1, 1], the range of the tanh component means (LIBERO's actions already lie there)."""
+    return {
+        "VISUAL": NormalizationMode.IDENTITY,
+        "STATE": NormalizationMode.IDENTITY,
+        "ENV": NormalizationMode.IDENTITY,
+        "ACTION": NormalizationMode.MIN_MAX,
+    }
+
+
+def use_dataset_frontend(config: "CachedFeaturesConfig", dataset_root: Path) -> None:
+    """Point `config.frontend_dir` at the training dataset's artefact copy unless the user chose one.
+
+    Read by the processor factory, which lerobot-train calls after building the policy.
+    """
+    frontend = Path(dataset_root) / FRONTEND_META_DIR
+    if config.frontend_dir is None and frontend.is_dir():
+        config.frontend_dir = str(frontend)
+
+
+@dataclass
+class CachedFeaturesConfig(PreTrainedConfig):
+    """Fields shared by every policy type of the plugin (defaults: the paper's Tables 1 and 2).
+
+    Args:
+        language_dim: Language representation size after PCA (Table 1: 384 -> 64).
+        vision_dim_per_camera: Visual PCA components per camera (Table 1: 512 -> 96).
+        num_cameras: Number of camera views whose features are concatenated (Table 1: 2).
+        proprio_dim: Proprioceptive dimension, joints 7 + gripper 2 (Table 1: 9).
+        action_dim: Action dimension (Table 1: 7).
+        visual_refresh_interval: A fresh visual observation arrives every this many control steps and is held
+            in between (Table 1: 4).
+        frontend_dir: Front-end artefact (`predvla fit-frontend`) that encodes live observations at
+            evaluation. None: the training dataset's copy (`meta/predvla_frontend`, written by `predvla
+            convert`) when there is one. Its contents are stored in the checkpoint's preprocessor, so
+            evaluation never reads this path.
+        head_hidden_dim: Hidden width of the two-layer decoders, the GMM action head included (256).
+        num_mixtures: Gaussian-mixture components K of the action head (Table 1: 5).
+        min_action_scale: Lower bound added to the softplus scales of the action head (Table 1: 0.05).
+        sequence_length: Training sequence length; episodes start at their first step and are padded to this
+            length, longer episodes are cut (Table 2: 200 short, 500 long).
+        train_steps: Paper's number of training steps (Table 2, PredVLA: 30,000). lerobot-train reads
+            `--steps`; `predvla` commands and configs/policy pass this value.
+        train_batch_size: Paper's batch size (Table 2: 32); passed to lerobot-train's `--batch_size`.
+        optimizer_lr: Adam learning rate of the network weights, constant (Table 2, PredVLA: 6e-5).
+        optimizer_weight_decay: Weight decay on network weights (Table 2: 1e-4).
+        grad_clip_norm: Gradient-norm clip (Table 2: "enabled"; the value is not given, 1.0 is ours).
+    """
+
+    language_dim: int = 64
+    vision_dim_per_camera: int = 96
+    num_cameras: int = 2
+    proprio_dim: int = 9
+    action_dim: int = 7
+    visual_refresh_interval: int = 4
+    frontend_dir: str | None = None
+    head_hidden_dim: int = 256
+    num_mixtures: int = 5
+    min_action_scale: float = 0.05
+    sequence_length: int = 200
+    train_steps: int = 30_000
+    train_batch_size: int = 32
+    optimizer_lr: float = 6e-5
+    optimizer_weight_decay: float = 1e-4
+    grad_clip_norm: float = 1.0
+
+    normalization_mapping: dict[str, NormalizationMode] = field(default_factory=cached_feature_normalization)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.visual_refresh_interval < 1:
+            raise ValueError(f"`visual_refresh_interval` must be >= 1, got {self.visual_refresh_interval}.")
+        if self.sequence_length < 1:
+            raise ValueError(f"`sequence_length` must be >= 1, got {self.sequence_length}.")
+
+    @property
+    def vision_dim(self) -> int:
+        """Concatenated visual dimension (Table 1: 2 x 96 = 192)."""
+        return self.vision_dim_per_camera * self.num_cameras
+
+    def get_optimizer_preset(self) -> AdamConfig:
+        # Adam with L2 weight decay (PredVLA's posterior group overrides both; see PredVLAPolicy.get_optim_params).
+        return AdamConfig(
+            lr=self.optimizer_lr, weight_decay=self.optimizer_weight_decay, grad_clip_norm=self.grad_clip_norm
+        )
+
+    def get_scheduler_preset(self) -> None:
+        return None  # Table 2: constant learning rate.
+
+    def validate_features(self) -> None:
+        validate_cached_features(self, type(self).__name__.removesuffix("Config"))
+
+    @property
+    def observation_delta_indices(self) -> None:
+        # Sequences are assembled from an in-memory table keyed by episode (policies/predvla/sequence_table.py).
+        return None
+
+    @property
+    def action_delta_indices(self) -> None:
+        return None
+
+    @property
+    def reward_delta_indices(self) -> None:
+        return None
+
+
+def validate_cached_features(config: CachedFeaturesConfig, policy_name: str) -> None:
+    """Check (and, for a bare config, set) the cached front-end inputs and the action output."""
+    expected = {
+        OBS_VISION_FEATURES: config.vision_dim,
+        OBS_LANGUAGE_FEATURES: config.language_dim,
+        OBS_STATE: config.proprio_dim,
+    }
+    if not config.input_features:  # A bare config: the inputs are fixed by the dimensions.
+        config.input_features = {
+            key: PolicyFeature(type=FeatureType.STATE, shape=(dim,)) for key, dim in expected.items()
+        }
+    for key, dim in expected.items():
+        feature = config.input_features.get(key)
+        if feature is None:
+            raise ValueError(
+                f"{policy_name} needs the input feature '{key}' of shape ({dim},); the dataset or environment "
+                f"provides {sorted(config.input_features)}. Convert LIBERO data with `predvla convert`."
+            )
+        if tuple(feature.shape) != (dim,):
+            raise ValueError(f"Input feature '{key}' must have shape ({dim},), got {tuple(feature.shape)}.")
+    if not config.output_features:
+        config.output_features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(config.action_dim,))}
+    action = config.output_features.get(ACTION)
+    if action is None or tuple(action.shape) != (config.action_dim,):
+        shape = None if action is None else tuple(action.shape)
+        raise ValueError(f"Output feature '{ACTION}' must have shape ({config.action_dim},), got {shape}.")
+    # Only the cached features are inputs; images and other columns are not part of the policy.
+    config.input_features = {
+        key: PolicyFeature(type=FeatureType.STATE, shape=(dim,)) for key, dim in expected.items()
+    }

@@ -1,0 +1,159 @@
+"""Configuration of the PredVLA policy (paper Tables 1 and 2)."""
+
+from dataclasses import dataclass
+
+from lerobot.configs import PreTrainedConfig
+from lerobot.optim.schedulers import CosineDecayWithWarmupSchedulerConfig
+
+from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
+
+MODULE_NAMES = ("T", "V", "A_top", "A_bottom")
+SHORT_HORIZON_TAU = (16.0, 8.0, 5.0, 2.0)
+LONG_HORIZON_TAU = (30.0, 14.0, 8.0, 2.0)
+LONG_HORIZON_SEQUENCE_LENGTH = 500
+CORRUPTION_CHANNELS = ("vision", "proprio")
+COMPLEXITY_REDUCTIONS = ("sum", "mean")  # training C of Eq. 10: summed over the sequence, or its mean
+
+
+@PreTrainedConfig.register_subclass("predvla")
+@dataclass
+class PredVLAConfig(CachedFeaturesConfig):
+    """Configuration for PredVLA, a hierarchical predictive-coding RNN policy.
+
+    Defaults are the paper's short-horizon LIBERO settings (Tables 1 and 2). The long-horizon preset
+    (LIBERO-10) is `PredVLAConfig.long_horizon()`, i.e. `--policy.tau=[30,14,8,2]
+    --policy.sequence_length=500` on the command line.
+
+    Inputs are the cached front-end features, never raw images: `observation.vision_features` (two
+    cameras x 96 PCA components), `observation.language_features` (64 PCA components of the
+    all-MiniLM-L6-v2 instruction embedding) and `observation.state` (7 joints + 2 gripper). The network
+    never receives them as inputs: vision and proprioception only enter the free energy minimised by
+    error regression; language enters the top module T (Eq. 4).
+
+    Fields shared with the other policy types (dimensions, front end, decoders, optimiser) are documented in
+    `CachedFeaturesConfig`; the paper's learning rate and step count are PredVLA's defaults there.
+
+    Args:
+        language_encoder_dim: Output size of the frozen sentence encoder (Table 1: 384).
+        vision_encoder_dim: Output size of the frozen ResNet18 per camera (Table 1: 512).
+        module_dims: Deterministic state sizes d_l of (T, V, A_top, A_bottom) (Table 1: 64/256/256/256).
+        latent_dim: Size r of each module's free variable c^l (Table 1: 64 per module).
+        bottleneck_dim: Width of the visual-to-action bottleneck W_VA (Eq. 5; Table 1: 256 -> 32 -> 256).
+        tau: Time constants of (T, V, A_top, A_bottom) (Table 1 short horizon: (16, 8, 5, 2);
+            long horizon: (30, 14, 8, 2)).
+        posterior_lr: Adam learning rate of the training posteriors c_q (Table 2: 1e-2).
+        lr_decay_to: None (default): constant learning rates (Table 2). A value: the network learning rate decays
+            along a cosine from `optimizer_lr` to this value over the run (`--steps`, at most `train_steps`),
+            and the posterior learning rate by the same factor (LeRobot's `cosine_decay_with_warmup`, no
+            warm-up). An option for experiments (docs/libero_object_cpu.md measures a cool-down with it).
+        lambda_v: Weight of the visual prediction error (Eq. 10; Table 2: 1).
+        lambda_q: Weight of the proprioceptive prediction error (Eq. 10; Table 2: 1).
+        lambda_a: Weight of the action negative log-likelihood (Eq. 10; Table 2: 1).
+        complexity_weights: w_l of (T, V, A_top, A_bottom) in the training complexity term (Eq. 8;
+            Table 2: (0.05, 0.02, 0.02, 0.01)).
+        complexity_reduction: How the training loss reduces C_t over a sequence. "sum" (default): C is the
+            sum of C_t over the sequence's valid steps, as in the free energy of Eq. 9, since Eq. 10 puts the
+            mask-normalised bar on the errors and the NLL but not on C; averaged over the batch. "mean": the
+            mask-normalised mean, like the other terms (about T times weaker; it leaves the priors far from
+            the posteriors on short schedules, see the README).
+        er_window: Error-regression window W in control steps (Table 2: 40).
+        er_iterations: Adam iterations n_itr per control step (Table 2: 10). 0 is exact open loop.
+        er_lr: Adam step size eta of error regression (Table 2: 0.05).
+        er_complexity_weight: w_ER, the complexity weight of every module during error regression
+            (Table 2: 1.0).
+        er_lambda_v: Visual prediction-error weight during error regression (1; 0 is ablation A4).
+        er_lambda_q: Proprioceptive prediction-error weight during error regression (1; 0 is A5).
+        use_bottleneck: Keep the visual-to-action bottleneck V -> A_top (Eq. 5); False is ablation A2.
+        use_efference_copy: Keep the efference copy A -> V of the model's own previous action and
+            proprioception predictions (Eq. 6); False is ablation A3.
+        er_corruption_channel: Observation channel corrupted before error regression (Section 4.4,
+            "Sensitivity to corrupted observations"): "vision" or "proprio"; None (default) corrupts nothing.
+            The other channel is left untouched.
+        er_corruption_alpha: Fraction alpha in [0, 1] of the window's observations of that channel replaced
+            (paper: 0.25, 0.5, 0.75, 1.0). Control step t is replaced iff floor((t+1) alpha) > floor(t alpha),
+            so every window of W steps holds exactly W alpha replaced steps when W alpha is an integer; for
+            vision the schedule counts visual refreshes, so the fraction applies to the fresh frames.
+        er_corruption_root: Root of a LeRobot dataset with the cached columns, source of the replacing
+            observations (an unrelated episode); required with `er_corruption_channel`.
+        er_corruption_episode: Episode of `er_corruption_root` whose observations replace the live ones: step t
+            of the live episode receives its step t (its last step once it has ended).
+    """
+
+    # Front end (Table 1).
+    language_encoder_dim: int = 384
+    vision_encoder_dim: int = 512
+
+    # Recurrent architecture (Table 1).
+    module_dims: tuple[int, int, int, int] = (64, 256, 256, 256)
+    latent_dim: int = 64
+    bottleneck_dim: int = 32
+    tau: tuple[float, float, float, float] = SHORT_HORIZON_TAU
+    use_bottleneck: bool = True
+    use_efference_copy: bool = True
+
+    # Training (Table 2).
+    posterior_lr: float = 1e-2
+    lr_decay_to: float | None = None
+    lambda_v: float = 1.0
+    lambda_q: float = 1.0
+    lambda_a: float = 1.0
+    complexity_weights: tuple[float, float, float, float] = (0.05, 0.02, 0.02, 0.01)
+    complexity_reduction: str = "sum"
+
+    # Online error regression (Table 2).
+    er_window: int = 40
+    er_iterations: int = 10
+    er_lr: float = 0.05
+    er_complexity_weight: float = 1.0
+    er_lambda_v: float = 1.0
+    er_lambda_q: float = 1.0
+    er_corruption_channel: str | None = None
+    er_corruption_alpha: float = 0.0
+    er_corruption_root: str | None = None
+    er_corruption_episode: int = 0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.module_dims = tuple(int(d) for d in self.module_dims)
+        self.tau = tuple(float(t) for t in self.tau)
+        self.complexity_weights = tuple(float(w) for w in self.complexity_weights)
+        for name, value in (("module_dims", self.module_dims), ("tau", self.tau),
+                            ("complexity_weights", self.complexity_weights)):
+            if len(value) != len(MODULE_NAMES):
+                raise ValueError(f"`{name}` needs one value per module {MODULE_NAMES}, got {value}.")
+        if self.complexity_reduction not in COMPLEXITY_REDUCTIONS:
+            raise ValueError(
+                f"`complexity_reduction` must be one of {COMPLEXITY_REDUCTIONS}, got {self.complexity_reduction!r}."
+            )
+        if min(self.tau) < 1.0:
+            raise ValueError(f"`tau` values must be >= 1 (Eq. 3), got {self.tau}.")
+        if self.er_window < 1 or self.er_iterations < 0:
+            raise ValueError(
+                f"`er_window` must be >= 1 and `er_iterations` >= 0, got {self.er_window}, {self.er_iterations}."
+            )
+        if self.er_corruption_channel not in (None, *CORRUPTION_CHANNELS):
+            raise ValueError(
+                f"`er_corruption_channel` must be one of {CORRUPTION_CHANNELS} or None, "
+                f"got {self.er_corruption_channel!r}."
+            )
+        if not 0.0 <= self.er_corruption_alpha <= 1.0:
+            raise ValueError(f"`er_corruption_alpha` must lie in [0, 1], got {self.er_corruption_alpha}.")
+        if self.er_corruption_channel is not None and self.er_corruption_root is None:
+            raise ValueError(
+                "`er_corruption_channel` needs `er_corruption_root`: a LeRobot dataset root with the cached columns "
+                "(e.g. --policy.er_corruption_root=datasets/libero_object --policy.er_corruption_episode=3)."
+            )
+
+    @classmethod
+    def long_horizon(cls, **kwargs) -> "PredVLAConfig":
+        """The paper's LIBERO-10 preset: tau (30, 14, 8, 2) and 500-step training sequences."""
+        kwargs.setdefault("tau", LONG_HORIZON_TAU)
+        kwargs.setdefault("sequence_length", LONG_HORIZON_SEQUENCE_LENGTH)
+        return cls(**kwargs)
+
+    def get_scheduler_preset(self) -> CosineDecayWithWarmupSchedulerConfig | None:
+        if self.lr_decay_to is None:
+            return None  # Table 2: constant learning rate.
+        return CosineDecayWithWarmupSchedulerConfig(
+            num_warmup_steps=0, num_decay_steps=self.train_steps, peak_lr=self.optimizer_lr, decay_lr=self.lr_decay_to
+        )

@@ -1,0 +1,221 @@
+"""What a researcher looks at first on a PredVLA checkpoint (`predvla inspect`).
+
+Everything is computed offline against the training dataset's cached columns, without the simulator:
+
+- open-loop actions (Section 3.5, n_itr = 0: every posterior at its prior) per task against the task's
+  time-aligned mean demonstration, and against every other task's: does the instruction pick the behaviour?
+- the language swap: the same open-loop chain driven by each other task's instruction, and how far the
+  actions move; the drive of the language term W_lang l (Eq. 4) and of its differences between tasks;
+- the training posteriors c_q (Eq. 10) per module: their size, their per-task means against the spread
+  within a task, and their gap to the priors c_p (Eqs. 1-2) along the training rollout;
+- error regression replayed on one demonstration per task (its own observations, step by step as when
+  acting): per-step prediction errors (Eq. 7), prior-posterior gap per module (Eq. 8), free energy (Eq. 9),
+  and its actions against the demonstrated ones next to the open-loop chain's.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
+from lerobot.utils.constants import ACTION
+from safetensors.torch import load_file
+from torch import Tensor
+
+from lerobot_predvla.utils.io import atomic_write_json
+
+from .configuration_predvla import MODULE_NAMES
+from .error_regression import ErrorRegression
+from .modeling_predvla import PredVLAPolicy
+from .posterior_store import POSTERIOR_STORE_FILE
+from .sequence_table import EpisodeSequences, read_columns
+
+
+@dataclass
+class TaskData:
+    """The training dataset grouped by task: episodes, names, time-aligned mean demonstrations."""
+
+    sequences: EpisodeSequences
+    names: list[str]  # task string per task index
+    episodes: list[list[int]]  # episode indices per task index
+    mean_action: Tensor  # (tasks, L, action_dim), normalised units, NaN past the longest demonstration
+    action_low: Tensor  # min-max statistics: raw = (x + 1) / 2 * (high - low) + low
+    action_high: Tensor
+
+    @classmethod
+    def load(cls, root: Path, policy: PredVLAPolicy) -> "TaskData":
+        meta = LeRobotDatasetMetadata("local/inspect", root=root)
+        stats = {k: {s: torch.as_tensor(np.asarray(v)) for s, v in d.items()} for k, d in meta.stats.items()}
+        sequences = EpisodeSequences.from_dataset(root, policy.config, stats)
+        columns = read_columns(root, ["episode_index", "task_index"])
+        task_of = {int(e): int(t) for e, t in zip(columns["episode_index"][:, 0], columns["task_index"][:, 0],
+                                                   strict=True)}
+        names = [""] * (max(task_of.values()) + 1)
+        for name, row in meta.tasks.iterrows():
+            names[int(row["task_index"])] = str(name)
+        episodes = [[e for e, t in sorted(task_of.items()) if t == task] for task in range(len(names))]
+        valid = (torch.arange(sequences.action.shape[1])[None] < sequences.length[:, None]).float()[..., None]
+        mean_action = torch.stack([
+            (sequences.action[eps] * valid[eps]).sum(0) / valid[eps].sum(0) for eps in episodes
+        ])  # 0/0 = NaN where no demonstration of the task is that long
+        return cls(sequences, names, episodes, mean_action, stats[ACTION]["min"].float(),
+                   stats[ACTION]["max"].float())
+
+    def raw(self, action: Tensor) -> Tensor:
+        return (action + 1) / 2 * (self.action_high - self.action_low) + self.action_low
+
+    def horizon(self, task: int) -> int:
+        """Mean demonstration length of a task: the steps the action comparisons run over."""
+        return int(self.sequences.length[self.episodes[task]].float().mean().round())
+
+
+def action_mse(a: Tensor, b: Tensor) -> float:
+    """Mean squared difference over the steps where both are defined."""
+    ok = ~(a.isnan() | b.isnan()).any(-1)
+    return float((a[ok] - b[ok]).pow(2).mean())
+
+
+@torch.no_grad()
+def open_loop(policy: PredVLAPolicy, language: Tensor, steps: int) -> Tensor:
+    """Exact open-loop actions (time, batch, action_dim), normalised: posteriors at their priors."""
+    model = policy.model
+    return model.rollout(model.initial_state(len(language)), model.language_term(language), steps=steps).a_hat
+
+
+@torch.no_grad()
+def language_report(policy: PredVLAPolicy, data: TaskData) -> dict:
+    """Open loop per task against the mean demonstrations, the language swap and the language drive."""
+    n, steps = len(data.names), data.sequences.action.shape[1]
+    language = torch.stack([data.sequences.language[eps[0]] for eps in data.episodes])
+    actions = open_loop(policy, language, steps).transpose(0, 1)  # (tasks, L, A): task i under instruction i
+    raw_actions, raw_means = data.raw(actions), data.raw(data.mean_action)
+    vs_demo = [[action_mse(raw_actions[i, :data.horizon(i)], raw_means[j, :data.horizon(i)]) for j in range(n)]
+               for i in range(n)]
+    swap = [[action_mse(raw_actions[i, :data.horizon(i)], raw_actions[j, :data.horizon(i)]) for j in range(n)]
+            for i in range(n)]
+    demo_gap = [[action_mse(raw_means[i, :data.horizon(i)], raw_means[j, :data.horizon(i)]) for j in range(n)]
+                for i in range(n)]
+    identified = [int(np.argmin(row)) == i for i, row in enumerate(vs_demo)]
+    drive = policy.model.language_term(language)  # W_lang l (Eq. 4)
+    diffs = [float((drive[i] - drive[j]).norm()) for i in range(n) for j in range(i + 1, n)]
+    off = ~np.eye(n, dtype=bool)
+    return {
+        "open_loop_actions": actions,
+        "open_loop_mse_own_task": [vs_demo[i][i] for i in range(n)],
+        "open_loop_mse_nearest_other_task": [min(vs_demo[i][j] for j in range(n) if j != i) if n > 1 else None
+                                             for i in range(n)],
+        "open_loop_picks_own_task": sum(identified) / n,
+        "open_loop_vs_mean_demos": vs_demo,
+        "language_swap_mse": swap,
+        "mean_demo_gap_mse": demo_gap,
+        "mean_language_swap_mse": float(np.asarray(swap)[off].mean()) if n > 1 else 0.0,
+        "mean_demo_gap": float(np.asarray(demo_gap)[off].mean()) if n > 1 else 0.0,
+        "language_drive_norm": float(drive.norm(dim=-1).mean()),
+        "language_difference_drive_norm": float(np.mean(diffs)) if diffs else 0.0,
+    }
+
+
+def posterior_report(policy: PredVLAPolicy, data: TaskData, store: Tensor) -> dict:
+    """Training posteriors per module: size, per-task means against the spread within a task, prior gap."""
+    r, seq = policy.config.latent_dim, data.sequences
+    valid = torch.arange(store.shape[1])[None] < seq.length[:, None]  # (E, L)
+    per_module = store.unflatten(-1, (4, r))  # (E, L, 4, r)
+    out: dict[str, dict] = {}
+    task_means = []
+    for eps in data.episodes:
+        v = valid[eps].float()[..., None, None]
+        task_means.append((per_module[eps] * v).sum(0) / v.sum(0).clamp_min(1))  # (L, 4, r)
+    task_means = torch.stack(task_means)  # (tasks, L, 4, r)
+    with torch.no_grad():
+        model, e = policy.model, torch.arange(store.shape[0])
+        batch = seq.batch(e, torch.device("cpu"))
+        traj = model.rollout(model.initial_state(len(e)), model.language_term(batch["language"]),
+                             store.transpose(0, 1))
+        gap = (store.transpose(0, 1) - model.priors(traj)).unflatten(-1, (4, r)).norm(dim=-1)  # (L, E, 4)
+    gap_valid = valid.T.float()[..., None]
+    for m, name in enumerate(MODULE_NAMES):
+        norms = per_module[..., m, :].norm(dim=-1)[valid]
+        within = torch.cat([(per_module[eps][..., m, :] - task_means[t, :, m])[valid[eps]].norm(dim=-1)
+                            for t, eps in enumerate(data.episodes)])
+        between = [float((task_means[i, :, m] - task_means[j, :, m]).norm(dim=-1).mean())
+                   for i in range(len(task_means)) for j in range(i + 1, len(task_means))]
+        out[name] = {
+            "mean_norm": float(norms.mean()),
+            "within_task_spread": float(within.mean()),
+            "between_task_mean_distance": float(np.mean(between)) if between else 0.0,
+            "prior_gap": float((gap[..., m:m + 1] * gap_valid).sum() / gap_valid.sum()),
+        }
+    return out
+
+
+def replay_error_regression(policy: PredVLAPolicy, data: TaskData, episodes: list[int]) -> dict:
+    """Error regression on the given episodes' own observations, all at once as a batch.
+
+    Returns per-step (time, batch) arrays: eps_v, eps_q, free energy of the newest step, prior-posterior gap
+    per module, and the actions of error regression and of the open-loop chain (normalised).
+    """
+    model, cfg = policy.model, policy.config
+    e = torch.as_tensor(episodes)
+    batch = data.sequences.batch(e, torch.device("cpu"))
+    steps = int(data.sequences.length[e].max())
+    er = ErrorRegression(model)
+    r = cfg.latent_dim
+    records = {k: [] for k in ("eps_v", "eps_q", "free_energy", "gap", "action")}
+    for t in range(steps):
+        er.observe(batch["language"], batch["vision"][t], batch["state"][t])
+        er.infer()
+        with torch.no_grad():
+            c_q = torch.stack(er.posteriors)
+            traj = er.rollout(er.start_state, er.lang_term, c_q)
+            er.state = traj.final
+            eps_v, eps_q = model.prediction_errors(traj, torch.stack(er.vision), torch.stack(er.proprio))
+            c_p = model.priors(traj)
+            complexity = model.complexity(c_q[-1:], c_p[-1:], (cfg.er_complexity_weight,) * 4)[0]
+            fresh = er.fresh[-1]  # the visual error counts on refresh steps only (Section 4.3)
+            records["eps_v"].append(eps_v[-1] if fresh else torch.full_like(eps_v[-1], float("nan")))
+            records["eps_q"].append(eps_q[-1])
+            records["free_energy"].append(cfg.er_lambda_v * eps_v[-1] * float(fresh) + cfg.er_lambda_q * eps_q[-1]
+                                          + complexity)
+            records["gap"].append((c_q[-1] - c_p[-1]).unflatten(-1, (4, r)).norm(dim=-1))
+            records["action"].append(traj.final.a_hat)
+    out = {k: torch.stack(v) for k, v in records.items()}
+    out["open_loop_action"] = open_loop(policy, batch["language"], steps)
+    out["demo_action"] = batch["action"][:steps]
+    out["valid"] = batch["valid"][:steps]
+    return out
+
+
+def er_summary(replay: dict, data: TaskData) -> dict:
+    """Action error of error regression and of open loop against the replayed demonstrations (raw units)."""
+    valid = replay["valid"]
+    demo = data.raw(replay["demo_action"])[valid]
+    er = float((data.raw(replay["action"])[valid] - demo).pow(2).mean())
+    ol = float((data.raw(replay["open_loop_action"])[valid] - demo).pow(2).mean())
+    gap = replay["gap"][valid]
+    return {
+        "er_action_mse": er,
+        "open_loop_action_mse": ol,
+        "er_gap_per_module": {name: float(gap[:, m].mean()) for m, name in enumerate(MODULE_NAMES)},
+        "er_eps_q": float(replay["eps_q"][valid].mean()),
+        "er_eps_v": float(replay["eps_v"][valid].nanmean()),
+    }
+
+
+def load_store(checkpoint: Path) -> Tensor | None:
+    """The training posteriors saved beside a training checkpoint's weights, if any."""
+    path = Path(checkpoint) / POSTERIOR_STORE_FILE
+    return load_file(str(path))["latents"] if path.is_file() else None
+
+
+def to_json(value):
+    """Report values without tensors (those go to the plots)."""
+    if isinstance(value, dict):
+        return {k: to_json(v) for k, v in value.items() if not isinstance(v, Tensor)}
+    if isinstance(value, list):
+        return [to_json(v) for v in value]
+    return value
+
+
+def write_json(path: Path, report: dict) -> None:
+    atomic_write_json(path, to_json(report))

@@ -1,0 +1,209 @@
+"""PredVLA policy for LeRobot: training with per-episode posteriors (Eq. 10), acting by error regression."""
+
+import tempfile
+from pathlib import Path
+
+import torch
+from lerobot.policies.pretrained import PreTrainedPolicy
+from lerobot.utils.constants import OBS_STATE
+from safetensors.torch import load_file
+from torch import Tensor
+
+from lerobot_predvla.policies.common.cached_features import (
+    OBS_LANGUAGE_FEATURES,
+    OBS_VISION_FEATURES,
+    use_dataset_frontend,
+)
+from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla.corruption import ObservationCorruption
+from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
+from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
+from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
+from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
+
+
+def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
+    """Mask-normalised mean over the sequence and batch (the overline of Eq. 10)."""
+    mask = mask.to(x.dtype)
+    return (x * mask).sum() / mask.sum().clamp_min(1.0)
+
+
+def training_complexity(complexity: Tensor, mask: Tensor, reduction: str) -> Tensor:
+    """C of Eq. 10 from the per-step C_t (time, batch): Eq. 10 puts no bar on C, so by default ("sum") it is
+    summed over each sequence's valid steps as in Eq. 9 and averaged over the batch; "mean" is the bar."""
+    if reduction == "mean":
+        return masked_mean(complexity, mask)
+    return (complexity * mask.to(complexity.dtype)).sum() / mask.shape[1]
+
+
+class PredVLAPolicy(PreTrainedPolicy):
+    """PredVLA: language-conditioned predictive-coding policy (paper Section 3).
+
+    Built by `lerobot-train` with the dataset's metadata, it holds the training posteriors of every
+    episode (`posterior_store`) and the episodes' cached feature columns in memory. Built from a
+    checkpoint for evaluation, it holds only the 675,732-parameter network.
+    """
+
+    config_class = PredVLAConfig
+    name = "predvla"
+
+    def __init__(self, config: PredVLAConfig, dataset_stats: dict | None = None, dataset_meta=None, **kwargs):
+        super().__init__(config)
+        config.validate_features()
+        self.config = config
+        self.model = PredictiveModel(config)
+        self.sequences: EpisodeSequences | None = None
+        self.posterior_store: PosteriorStore | None = None
+        if dataset_meta is not None:
+            use_dataset_frontend(config, Path(dataset_meta.root))
+            self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
+            self.posterior_store = PosteriorStore(
+                self.sequences.vision.shape[0], config.sequence_length, self.model.posterior_dim
+            )
+        self._write_posteriors = True
+        self.corruption = ObservationCorruption.from_config(config)  # Section 4.4; None unless configured
+        self.reset()
+
+    # ----- parameters, saving, loading -------------------------------------------------------------
+    def network_parameters(self) -> list[torch.nn.Parameter]:
+        """The trainable controller (Table 1: 675,732 parameters), posteriors excluded."""
+        return list(self.model.parameters())
+
+    def get_optim_params(self) -> list[dict]:
+        groups = [{"params": self.network_parameters()}]  # lr and weight decay from the optimizer preset
+        if self.posterior_store is not None:
+            groups.append(
+                {"params": [self.posterior_store.latents], "lr": self.config.posterior_lr, "weight_decay": 0.0}
+            )
+        return groups
+
+    def state_dict(self, *args, **kwargs):
+        """The network only: posteriors live in their own file, never in `model.safetensors`."""
+        state = super().state_dict(*args, **kwargs)
+        for key in [k for k in state if k.startswith("posterior_store.")]:
+            del state[key]
+        return state
+
+    def _save_pretrained(self, save_directory: Path, state_dict: dict[str, Tensor] | None = None) -> None:
+        super()._save_pretrained(save_directory, state_dict=state_dict)
+        if self.posterior_store is not None and self._write_posteriors:
+            self.posterior_store.save(Path(save_directory))  # training checkpoints only; see push_model_to_hub
+
+    def push_model_to_hub(self, cfg, peft_model=None, state_dict=None, dataset_meta=None) -> str:
+        """`lerobot-train --policy.push_to_hub=true`: network, train config, front end and PredVLA's own card
+        (`hub/predvla_card.md`), never the training posteriors. LeRobot pushes the processors afterwards."""
+        if peft_model is not None:
+            raise NotImplementedError("PredVLA is trained in full; --policy.use_peft is not supported.")
+        from lerobot_predvla.hub.publish import push_policy
+
+        return self._without_posteriors(
+            push_policy, self, self.config.repo_id, cfg=cfg, state_dict=state_dict, dataset_meta=dataset_meta,
+            private=self.config.private,
+        )
+
+    def push_to_hub(self, repo_id: str, *, private: bool | None = None, card_kwargs: dict | None = None) -> str:
+        """Publish this policy (network, config, PredVLA card; no posteriors) to `repo_id`."""
+        if card_kwargs:
+            raise ValueError("PredVLA's model card is rendered from hub/predvla_card.md; card_kwargs are not used.")
+        from lerobot_predvla.hub.publish import push_policy
+
+        return self._without_posteriors(push_policy, self, repo_id, private=private)
+
+    def generate_model_card(
+        self, dataset_repo_id=None, model_type=None, license=None, tags=None, cfg=None, dataset_meta=None
+    ):
+        """PredVLA's card (`hub/predvla_card.md`) instead of LeRobot's generic one (same signature)."""
+        from huggingface_hub import ModelCard
+
+        from lerobot_predvla.hub.publish import DatasetSummary, publishable_files, render_card
+
+        with tempfile.TemporaryDirectory() as tmp:
+            self._without_posteriors(self.save_pretrained, Path(tmp))
+            if cfg is not None:
+                cfg.save_pretrained(Path(tmp))
+            dataset = DatasetSummary.from_meta(dataset_meta) if dataset_meta is not None else None
+            return ModelCard(render_card(publishable_files(Path(tmp)), self.config.repo_id or "local", dataset))
+
+    def _without_posteriors(self, fn, *args, **kwargs):
+        self._write_posteriors = False  # the Hub gets the controller, never the training posteriors
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self._write_posteriors = True
+
+    @classmethod
+    def _load_as_safetensor(cls, model: "PredVLAPolicy", model_file: str, map_location: str, strict: bool):
+        model.load_state_dict(load_file(model_file, device="cpu"))
+        if model.posterior_store is not None:  # resuming training: restore the posteriors too
+            model.posterior_store.load(Path(model_file).parent)
+        return model
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        """Strict on the network; the posteriors are optional since they never enter the weights file."""
+        missing, unexpected = super().load_state_dict(state_dict, strict=False, assign=assign)
+        missing = [k for k in missing if not k.startswith("posterior_store.")]
+        if strict and (missing or unexpected):
+            raise KeyError(f"PredVLA state dict: missing keys {missing}, unexpected keys {unexpected}.")
+        return torch.nn.modules.module._IncompatibleKeys(missing, unexpected)
+
+    # ----- training ------------------------------------------------------------------------------------
+    def forward(self, batch: dict[str, Tensor], reduction: str = "mean") -> tuple[Tensor, dict]:
+        """Training loss of Eq. 10 on whole episodes of the batch's `episode_index`."""
+        if reduction != "mean":
+            raise NotImplementedError(
+                f"PredVLA's loss is a mask-normalised mean over whole episodes (Eq. 10); reduction={reduction!r} "
+                "(per-sample weighting in lerobot-train) is not supported."
+            )
+        if self.sequences is None or self.posterior_store is None:
+            raise RuntimeError(
+                "PredVLAPolicy.forward needs the training dataset: build the policy with `dataset_meta` "
+                "(lerobot-train does) so that episodes and posteriors are available."
+            )
+        cfg = self.config
+        episode_index = batch["episode_index"].reshape(-1)
+        seq = self.sequences.batch(episode_index, self.posterior_store.latents.device)
+        c_q = self.posterior_store.gather(episode_index.to(self.posterior_store.latents.device))
+        model = self.model
+        traj = model.rollout(
+            model.initial_state(len(episode_index)), model.language_term(seq["language"]), c_q
+        )
+        valid = seq["valid"]
+        steps = torch.arange(valid.shape[0], device=valid.device)[:, None]
+        fresh = valid & (steps % cfg.visual_refresh_interval == 0)  # visual error only on refresh steps
+        eps_v, eps_q = model.prediction_errors(traj, seq["vision"], seq["state"])
+        nll = model.action_nll(traj, seq["action"])
+        complexity = model.complexity(c_q, model.priors(traj), cfg.complexity_weights)
+        terms = {
+            "vision_error": masked_mean(eps_v, fresh),
+            "proprio_error": masked_mean(eps_q, valid),
+            "action_nll": masked_mean(nll, valid),
+            "complexity": training_complexity(complexity, valid, cfg.complexity_reduction),
+        }
+        loss = (
+            cfg.lambda_v * terms["vision_error"] + cfg.lambda_q * terms["proprio_error"]
+            + cfg.lambda_a * terms["action_nll"] + terms["complexity"]
+        )
+        return loss, {k: v.item() for k, v in terms.items()}
+
+    # ----- acting --------------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Clear the error-regression window (called at every environment reset)."""
+        self.error_regression = ErrorRegression(self.model)
+        self.control_step = 0
+
+    @torch.no_grad()
+    def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        return self.select_action(batch)[:, None]
+
+    def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        """One control step of error regression; works under lerobot-eval's `torch.inference_mode()`."""
+        if self.corruption is not None:  # the corrupted observation is what error regression sees
+            batch = self.corruption(self.control_step, batch)
+        self.control_step += 1
+        with torch.inference_mode(False), torch.enable_grad():
+            # Inputs created in inference mode cannot enter autograd: clone them out of it.
+            inputs = [batch[k].clone() for k in (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE)]
+            inputs = [x[None] if x.dim() == 1 else x for x in inputs]
+            action = self.error_regression(*inputs)
+        return action.detach()
+

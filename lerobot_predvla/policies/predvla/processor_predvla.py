@@ -1,0 +1,46 @@
+"""Pre- and post-processing pipelines of PredVLA, shared by every policy type of the plugin (same inputs)."""
+
+from typing import Any
+
+import torch
+from lerobot.processor import PolicyAction, PolicyProcessorPipeline
+from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
+
+from lerobot_predvla.frontend.artefact import FrontendArtefact
+from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
+from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
+
+
+def frontend_step(config: CachedFeaturesConfig) -> FrontendProcessorStep:
+    """The frozen front end of `config.frontend_dir`, or a pass-through step for cached features only."""
+    if config.frontend_dir is None:
+        return FrontendProcessorStep()
+    artefact = FrontendArtefact.load(config.frontend_dir)
+    artefact.check_dims(
+        config.language_dim, config.vision_dim_per_camera, list(artefact.cameras), config.frontend_dir
+    )
+    return FrontendProcessorStep.from_artefact(artefact)
+
+
+def make_predvla_pre_post_processors(
+    config: CachedFeaturesConfig,
+    dataset_stats: dict[str, dict[str, torch.Tensor]] | None = None,
+) -> tuple[
+    PolicyProcessorPipeline[dict[str, Any], dict[str, Any]],
+    PolicyProcessorPipeline[PolicyAction, PolicyAction],
+]:
+    """Input: rename -> batch dim -> front end -> device -> normalise. Output: unnormalise -> cpu.
+
+    LeRobot's default steps (`make_default_policy_processor_steps`) with the front end inserted before the
+    device step.
+    The front-end step turns live environment observations into the cached features (training batches
+    already have them) and carries the artefact of `config.frontend_dir` into the checkpoint. The inputs
+    are the cached front-end features: PCA outputs and raw proprioception pass through
+    unchanged (identity, Section 3.1); actions are min-max scaled to the [-1, 1] range of the tanh
+    component means and scaled back on the way out.
+    """
+    s = make_default_policy_processor_steps(config, dataset_stats)
+    return make_policy_processor_pipelines(
+        input_steps=[s.rename_observations, s.add_batch_dim, frontend_step(config), s.to_device, s.normalize],
+        output_steps=[s.unnormalize, s.to_cpu],
+    )

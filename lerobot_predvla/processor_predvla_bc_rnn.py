@@ -1,8 +1,0 @@
-"""Pre- and post-processing of BC-RNN: PredVLA's (front end, identity features, min-max actions)."""
-
-from .configuration_predvla_bc_rnn import PredVLABCRNNConfig
-from .processor_predvla import make_predvla_pre_post_processors
-
-
-def make_predvla_bc_rnn_pre_post_processors(config: PredVLABCRNNConfig, dataset_stats: dict | None = None):
-    return make_predvla_pre_post_processors(config, dataset_stats)

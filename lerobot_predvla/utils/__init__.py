@@ -1,0 +1,1 @@
+"""Small helpers shared across the package: atomic files, checkpoint paths, versions, parameter counts."""
