@@ -346,10 +346,11 @@ class FakeData(FakeLeRobot):
         if "lerobot_predvla.cli.main" not in command:
             return super().__call__(command, log)
         self.commands.append(command)
-        stage, value = command[command.index("lerobot_predvla.cli.main") + 1], dict(zip(command, command[1:], strict=False))
+        stage = command[command.index("lerobot_predvla.cli.main") + 1]
+        value = dict(zip(command, command[1:], strict=False))
         if stage == "demos":
-            from lerobot_predvla.libero.env import task_spec
             from lerobot_predvla.data.hdf5_layout import task_file
+            from lerobot_predvla.libero.env import task_spec
 
             for task in value["--tasks"].split(","):
                 path = task_file(Path(value["--out"]), task_spec(value["--suite"], int(task)))
@@ -372,8 +373,8 @@ def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
     path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], data=data,
                       eval={"device": "cpu", "tasks": [0, 1], "n_episodes": 4})
     runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FakeData())
-    from lerobot_predvla.libero.env import task_spec
     from lerobot_predvla.data.hdf5_layout import task_file
+    from lerobot_predvla.libero.env import task_spec
 
     done_task = task_file(tmp_path / "out/hdf5", task_spec("libero_object", 1))  # a killed demos run left task 1
     done_task.parent.mkdir(parents=True)
