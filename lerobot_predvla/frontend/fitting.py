@@ -88,12 +88,17 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
             "frame_stride": cfg.frame_stride,
             "num_distinct_instructions": len(set(instructions)),
             "seconds": round(time.perf_counter() - start, 1),
-            "versions": {
-                pkg: importlib.metadata.version(pkg)
-                for pkg in ("torch", "torchvision", "sentence-transformers", "scikit-learn", "lerobot")
-            },
+            "versions": package_versions(),
         },
     )
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of the libraries that determine the features, recorded with every fit."""
+    return {
+        pkg: importlib.metadata.version(pkg)
+        for pkg in ("torch", "torchvision", "sentence-transformers", "scikit-learn", "lerobot")
+    }
 
 
 def variance_summary(artefact: FrontendArtefact) -> str:
