@@ -22,6 +22,8 @@ from .configuration_predvla import (
     OBS_LANGUAGE_FEATURES,
     OBS_VISION_FEATURES,
     cached_feature_normalization,
+    feature_layout,
+    has_paper_layout,
     use_dataset_frontend,
     validate_cached_features,
 )
@@ -52,9 +54,10 @@ class ObservationPolicyConfig(PreTrainedConfig):
     Args:
         language_dim: Language representation size after PCA (Table 1: 64).
         vision_dim_per_camera: Visual PCA components per camera (Table 1: 96).
-        num_cameras: Number of camera views whose features are concatenated (Table 1: 2).
-        proprio_dim: Proprioceptive dimension (Table 1: 9).
-        action_dim: Action dimension (Table 1: 7).
+        num_cameras: Number of camera views whose features are concatenated (Table 1: 2); set from the
+            dataset's `observation.vision_features`.
+        proprio_dim: Proprioceptive dimension (Table 1: 9); set from the dataset's `observation.state`.
+        action_dim: Action dimension (Table 1: 7); set from the dataset's `action`.
         visual_refresh_interval: Vision is refreshed every this many control steps and held in between
             (Table 1: 4).
         frontend_dir: Front-end artefact that encodes live observations at evaluation, as in PredVLAConfig.
@@ -154,12 +157,13 @@ class ObservationPolicy(PreTrainedPolicy):
             self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
 
     def log_parameter_count(self) -> None:
-        """Start-up line: our trainable parameters beside the paper's (Tables 4 and 5)."""
+        """Start-up line: our trainable parameters and layout, beside the paper's count at its layout (Tables 4
+        and 5)."""
         ours = count_trainable(self)
-        paper = "" if self.paper_parameters is None else (
-            f" (paper: {self.paper_parameters:,}, {100 * (ours - self.paper_parameters) / self.paper_parameters:+.2f}%)"
+        paper = "" if self.paper_parameters is None or not has_paper_layout(self.config) else (
+            f"; paper: {self.paper_parameters:,}, {100 * (ours - self.paper_parameters) / self.paper_parameters:+.2f}%"
         )
-        logging.info("%s: %s trainable parameters%s", self.name, f"{ours:,}", paper)
+        logging.info("%s: %s trainable parameters (%s%s)", self.name, f"{ours:,}", feature_layout(self.config), paper)
 
     def get_optim_params(self) -> list[dict]:
         return [{"params": [p for p in self.parameters() if p.requires_grad]}]
