@@ -5,7 +5,6 @@ Datasets are built with LeRobot's own API in two layouts (LIBERO community: stat
 `--vision-weights random` (ImageNet weights cannot be downloaded offline) at 64 px to keep the tests fast.
 """
 
-import argparse
 import json
 import os
 import subprocess
@@ -21,9 +20,8 @@ import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.constants import OBS_STATE
 from lerobot_factory import LIBERO_COMMUNITY, SO101, Layout, make_dataset
+from test_conversion import run_cli
 
-from lerobot_predvla.commands import convert as convert_cmd
-from lerobot_predvla.commands import fit_frontend as fit_frontend_cmd
 from lerobot_predvla.configuration_predvla import (
     FRONTEND_META_DIR,
     OBS_LANGUAGE_FEATURES,
@@ -40,15 +38,6 @@ EPISODES = {
     "so101": (SO101, [("pick up the red cube", 6), ("put the cube in the box", 5), ("pick up the red cube", 4)]),
 }
 SIZES = {"libero": (8, 7, 2), "so101": (6, 6, 2)}  # state, action, cameras
-
-
-def run_cli(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser()
-    subparsers = parser.add_subparsers()
-    fit_frontend_cmd.add_parser(subparsers)
-    convert_cmd.add_parser(subparsers)
-    args = parser.parse_args(argv)
-    return args.func(args)
 
 
 def run(cmd: list[str]) -> str:

@@ -45,32 +45,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     datasets.disable_progress_bars()  # Our own bar counts frames; the per-episode Map bars are noise.
+    common = {
+        "frontend_dir": args.frontend, "out": args.out, "repo_id": args.repo_id, "language_dim": args.language_dim,
+        "vision_dim_per_camera": args.vision_dim_per_camera, "batch_size": args.batch_size,
+    }
     try:
         if dataset_source_given(args):
             summary = convert_dataset(
-                frontend_dir=args.frontend,
-                out=args.out,
-                dataset_root=args.dataset_root,
-                dataset_repo_id=args.dataset_repo_id,
-                repo_id=args.repo_id,
-                cameras=parse_cameras(args.cameras),
-                language_dim=args.language_dim,
-                vision_dim_per_camera=args.vision_dim_per_camera,
-                batch_size=args.batch_size,
+                dataset_root=args.dataset_root, dataset_repo_id=args.dataset_repo_id,
+                cameras=parse_cameras(args.cameras), **common,
             )
         elif args.hdf5_root is None or args.suite is None:
             raise ValueError("give --hdf5-root and --suite (LIBERO hdf5), or --dataset-root/--dataset-repo-id.")
         else:
             summary = convert_suite(
-                hdf5_root=args.hdf5_root,
-                suite=args.suite,
-                frontend_dir=args.frontend,
-                out=args.out,
-                repo_id=args.repo_id,
-                language_dim=args.language_dim,
-                vision_dim_per_camera=args.vision_dim_per_camera,
-                image_storage=args.image_storage,
-                batch_size=args.batch_size,
+                hdf5_root=args.hdf5_root, suite=args.suite, image_storage=args.image_storage, **common
             )
     except INPUT_ERRORS as err:
         print(f"predvla convert: error: {err}", file=sys.stderr)
