@@ -14,8 +14,8 @@ from lerobot.processor import (
 )
 from lerobot.processor.factory import make_policy_processor_pipelines
 
-from .configuration_predvla import PredVLAConfig
-from .frontend.artefact import FrontendArtefact
+from .configuration_predvla import OBS_VISION_FEATURES, PredVLAConfig
+from .frontend.artefact import FrontendArtefact, FrontendArtefactError
 from .frontend.processor_step import FrontendProcessorStep
 
 
@@ -27,6 +27,11 @@ def frontend_step(config: PredVLAConfig) -> FrontendProcessorStep:
     artefact.check_dims(
         config.language_dim, config.vision_dim_per_camera, list(artefact.cameras), config.frontend_dir
     )
+    if len(artefact.cameras) != config.num_cameras:
+        raise FrontendArtefactError(
+            f"{config.frontend_dir}: the front end encodes {len(artefact.cameras)} cameras {list(artefact.cameras)}, "
+            f"the policy was built for {config.num_cameras} (its '{OBS_VISION_FEATURES}' features)."
+        )
     return FrontendProcessorStep.from_artefact(artefact)
 
 
