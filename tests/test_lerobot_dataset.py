@@ -288,3 +288,12 @@ def test_lerobot_eval_on_libero_with_lerobots_state(libero_layout, tmp_path):
     info = json.loads((tmp_path / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 1, log[-2000:]
     assert 0.0 <= info["overall"]["pc_success"] <= 100.0
+
+
+def test_model_card_describes_the_robots_own_layout(so101_layout):
+    from lerobot_predvla.hub import publishable_files, render_card
+
+    card = render_card(publishable_files(so101_layout["checkpoint"]), "me/predvla_so101", None)
+    assert "| `observation.state` | (6,) | the training dataset's `observation.state` (state) |" in card
+    assert "| `action` | (6,) | the training dataset's `action` (action) |" in card
+    assert "joint positions (7)" not in card
