@@ -4,7 +4,8 @@
   `observation.images.image` and `observation.images.image2`, 7-dim actions, 10 fps.
 - SO-101 layout: 6-dim joint state and action, one or two cameras (`front`, `wrist`), 30 fps.
 
-Images are small and stored as PNG (`use_videos=False`) so the tests stay fast and need no FFmpeg.
+Images are small and stored as PNG (`use_videos=False`) so the tests stay fast; `use_videos=True` stores
+them as LeRobot's default AV1 videos instead.
 """
 
 from dataclasses import dataclass
@@ -42,9 +43,9 @@ SO101 = Layout(
 )
 
 
-def layout_features(layout: Layout) -> dict:
+def layout_features(layout: Layout, use_videos: bool = False) -> dict:
     features = {
-        key: {"dtype": "image", "shape": (h, w, 3), "names": ["height", "width", "channels"]}
+        key: {"dtype": "video" if use_videos else "image", "shape": (h, w, 3), "names": ["height", "width", "channels"]}
         for key, (h, w) in layout.cameras.items()
     }
     features["observation.state"] = {
@@ -68,12 +69,14 @@ def frames(shape: tuple[int, int], num_frames: int, rng: np.random.Generator) ->
 
 
 def make_dataset(
-    root: Path, layout: Layout, episodes: list[tuple[str, int]], repo_id: str = "local/tiny", seed: int = 0
+    root: Path, layout: Layout, episodes: list[tuple[str, int]], repo_id: str = "local/tiny", seed: int = 0,
+    use_videos: bool = False,
 ) -> LeRobotDataset:
     """Write one episode per (task, length) with LeRobotDataset.create/add_frame/save_episode/finalize."""
     rng = np.random.default_rng(seed)
     dataset = LeRobotDataset.create(
-        repo_id, layout.fps, layout_features(layout), root=root, robot_type=layout.robot_type, use_videos=False
+        repo_id, layout.fps, layout_features(layout, use_videos), root=root, robot_type=layout.robot_type,
+        use_videos=use_videos,
     )
     for task, length in episodes:
         images = {key: frames(shape, length, rng) for key, shape in layout.cameras.items()}

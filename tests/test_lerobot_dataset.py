@@ -175,6 +175,31 @@ def test_cameras_flag_chooses_the_streams(layout, tmp_path):
     assert info["features"][OBS_VISION_FEATURES]["shape"] == [96]
 
 
+def test_video_dataset_keeps_its_videos(tmp_path, capsys):
+    """Cameras stored as videos (LeRobot's default): decoded through LeRobotDataset, copied byte for byte."""
+    layout = replace(SO101, cameras={"observation.images.front": (24, 32)})
+    make_dataset(tmp_path / "source", layout, [("pick", 6), ("place", 5)], use_videos=True)
+    assert fit(tmp_path / "source", tmp_path / "frontend") == 0
+    assert convert(tmp_path / "source", tmp_path / "frontend", tmp_path / "converted") == 0
+    videos = sorted((tmp_path / "source" / "videos").rglob("*.mp4"))
+    assert videos
+    for video in videos:
+        assert (tmp_path / "converted" / video.relative_to(tmp_path / "source")).read_bytes() == video.read_bytes()
+    original = LeRobotDataset("local/tiny", root=tmp_path / "source")
+    written = LeRobotDataset("local/tiny", root=tmp_path / "converted")
+    frontend = FrozenFrontend.load(tmp_path / "frontend", verbose=False)
+    images = {"observation.images.front": torch.stack([original[i]["observation.images.front"] for i in range(11)])}
+    cached = torch.stack([written[i][OBS_VISION_FEATURES] for i in range(11)])
+    torch.testing.assert_close(cached, frontend.encode_images(images), rtol=1e-5, atol=1e-5)
+
+    # An episode whose video segment is shorter than the episode is rejected.
+    _edit_parquet(next((tmp_path / "source" / "meta" / "episodes").glob("*/*.parquet")),
+                  "videos/observation.images.front/to_timestamp", 1, 0.25)
+    capsys.readouterr()
+    _assert_rejected(convert(tmp_path / "source", tmp_path / "frontend", tmp_path / "again"), capsys,
+                     tmp_path / "again", ["episode 1", "key 'observation.images.front'", "length mismatch"])
+
+
 # ----- bad input: one line naming dataset, episode and key; exit code 2; nothing written -------------------------
 def _edit_parquet(path: Path, column: str, row: int, value) -> None:
     table = pq.read_table(path)
