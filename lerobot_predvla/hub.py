@@ -225,8 +225,11 @@ def _frontend_section(meta: dict | None) -> tuple[str, str]:
 def _format_fit(fit: dict) -> str:
     if not fit:
         return "not recorded"
-    keys = ("suites", "demonstrations", "frames", "instructions")
-    parts = [f"{k}: {', '.join(map(str, v)) if isinstance(v, list) else v}" for k in keys if (v := fit.get(k))]
+    # The fit records of `predvla fit-frontend` on LIBERO hdf5 (suites) or on a LeRobot dataset (dataset).
+    keys = {"suites": "suites", "dataset": "dataset", "num_demos": "demonstrations", "num_frames": "frames",
+            "num_distinct_instructions": "instructions"}
+    parts = [f"{name}: {', '.join(map(str, v)) if isinstance(v, list) else v}"
+             for k, name in keys.items() if (v := fit.get(k))]
     return "; ".join(parts) or "not recorded"
 
 

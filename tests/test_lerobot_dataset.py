@@ -322,3 +322,5 @@ def test_model_card_describes_the_robots_own_layout(so101_layout):
     assert "| `observation.state` | (6,) | the training dataset's `observation.state` (state) |" in card
     assert "| `action` | (6,) | the training dataset's `action` (action) |" in card
     assert "joint positions (7)" not in card
+    source = so101_layout["root"] / "source"
+    assert f"| fitted on | dataset: {source}; demonstrations: 3; frames: 15; instructions: 2 |" in card
