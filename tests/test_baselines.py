@@ -201,7 +201,8 @@ def test_lerobot_train_cli_runs_a_baseline_config(synthetic_dataset, tmp_path):
     result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
     log = result.stdout + result.stderr
     assert result.returncode == 0, log[-3000:]
-    assert "predvla_bc_rnn: 675,595 trainable parameters (paper: 674,276" in log and "action_nll" in log
+    layout = "2 cameras x 96, state 9, action 7, language 64"
+    assert f"predvla_bc_rnn: 675,595 trainable parameters ({layout}; paper: 674,276" in log and "action_nll" in log
     assert (tmp_path / "run" / "checkpoints" / "000002" / "pretrained_model" / "model.safetensors").is_file()
     # A saved BC-RNN checkpoint publishes with its own card (it used to fail on PredVLA's `tau`).
     push = subprocess.run(

@@ -4,6 +4,7 @@ import dataclasses
 
 import pytest
 import torch
+from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.datasets import LeRobotDatasetMetadata
 from lerobot.policies.factory import make_policy
 from safetensors import safe_open
@@ -62,6 +63,43 @@ def test_parameter_count_matches_table_1():
     policy = PredVLAPolicy(PredVLAConfig())
     assert sum(p.numel() for p in policy.parameters() if p.requires_grad) == 675_732
     assert policy.posterior_store is None  # no dataset: the controller only
+
+
+def features(vision: int, language: int, state: int, action: int) -> tuple[dict, dict]:
+    """Input and output features as `make_policy` passes a dataset's (images and other columns included)."""
+    inputs = {
+        "observation.vision_features": PolicyFeature(FeatureType.STATE, (vision,)),
+        "observation.language_features": PolicyFeature(FeatureType.STATE, (language,)),
+        "observation.state": PolicyFeature(FeatureType.STATE, (state,)),
+        "observation.images.front": PolicyFeature(FeatureType.VISUAL, (3, 8, 8)),
+    }
+    return inputs, {"action": PolicyFeature(FeatureType.ACTION, (action,))}
+
+
+@pytest.mark.parametrize("sizes", [(192, 9, 7), (192, 8, 7), (96, 6, 6), (288, 14, 12)])
+def test_sizes_follow_the_dataset_features(sizes):
+    """Any state and action dimension and any number of cameras; Table 1's layout keeps 675,732 parameters."""
+    vision, state, action = sizes
+    inputs, outputs = features(vision, 64, state, action)
+    config = PredVLAConfig(input_features=inputs, output_features=outputs)
+    policy = PredVLAPolicy(config)
+    assert (config.num_cameras, config.proprio_dim, config.action_dim) == (vision // 96, state, action)
+    assert sorted(config.input_features) == sorted(k for k in inputs if "images" not in k)
+    count = sum(p.numel() for p in policy.parameters())
+    assert (count == 675_732) == (sizes == (192, 9, 7))
+    actions = run(policy, [{"observation.vision_features": torch.randn(2, vision),
+                            "observation.language_features": torch.randn(2, 64),
+                            "observation.state": torch.randn(2, state)}])
+    assert actions.shape == (1, 2, action) and torch.isfinite(actions).all()
+
+
+def test_unusable_feature_sizes_are_rejected():
+    with pytest.raises(ValueError, match="not a multiple of vision_dim_per_camera=96"):
+        PredVLAConfig(input_features=features(100, 64, 9, 7)[0], output_features=features(100, 64, 9, 7)[1]
+                      ).validate_features()
+    with pytest.raises(ValueError, match="language_dim is 64"):
+        PredVLAConfig(input_features=features(192, 32, 9, 7)[0], output_features=features(192, 32, 9, 7)[1]
+                      ).validate_features()
 
 
 def test_defaults_match_tables_1_and_2():

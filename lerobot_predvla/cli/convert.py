@@ -1,4 +1,5 @@
-"""`predvla convert`: LIBERO hdf5 suite -> LeRobot v3.0 dataset with cached front-end features."""
+"""`predvla convert`: LIBERO hdf5 suite, or an existing LeRobot dataset, -> LeRobot v3.0 dataset with cached
+front-end features."""
 
 import argparse
 import sys
@@ -6,24 +7,35 @@ from pathlib import Path
 
 import datasets
 
-from lerobot_predvla.cli.fit_frontend import CONFIG_DEFAULTS, INPUT_ERRORS
+from lerobot_predvla.cli.fit_frontend import (
+    CONFIG_DEFAULTS,
+    INPUT_ERRORS,
+    add_dataset_source_arguments,
+    dataset_source_given,
+    parse_cameras,
+)
 from lerobot_predvla.data.conversion import IMAGE_STORAGES, convert_suite
+from lerobot_predvla.data.dataset_conversion import convert_dataset
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "convert",
-        help="Convert a LIBERO hdf5 suite into a LeRobot dataset with cached PredVLA features.",
+        help="Convert a LIBERO hdf5 suite or a LeRobot dataset into a LeRobot dataset with cached PredVLA features.",
         description=__doc__,
     )
-    parser.add_argument("--hdf5-root", type=Path, required=True, help="Directory with <suite>/*_demo.hdf5.")
-    parser.add_argument("--suite", required=True, help="Suite to convert, e.g. libero_object.")
+    parser.add_argument("--hdf5-root", type=Path, default=None, help="Directory with <suite>/*_demo.hdf5.")
+    parser.add_argument("--suite", default=None, help="Suite to convert, e.g. libero_object (with --hdf5-root).")
+    add_dataset_source_arguments(parser)
     parser.add_argument("--frontend", type=Path, required=True, help="Artefact from `predvla fit-frontend`.")
     parser.add_argument("--out", type=Path, required=True, help="Dataset root to create (must not exist).")
-    parser.add_argument("--repo-id", default=None, help="Dataset repo id (default local/<suite>).")
+    parser.add_argument(
+        "--repo-id", default=None, help="Repo id of the new dataset (default local/<suite> or local/<out name>)."
+    )
     parser.add_argument(
         "--image-storage", choices=IMAGE_STORAGES, default="video",
-        help="Camera frames as AV1 video (LeRobot default, small, lossy) or PNG (lossless, ~5x larger).",
+        help="hdf5 only: camera frames as AV1 video (LeRobot default, small, lossy) or PNG (lossless, ~5x "
+        "larger). A LeRobot dataset keeps its own storage.",
     )
     parser.add_argument("--language-dim", type=int, default=CONFIG_DEFAULTS["language_dim"])
     parser.add_argument("--vision-dim-per-camera", type=int, default=CONFIG_DEFAULTS["vision_dim_per_camera"])
@@ -33,18 +45,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     datasets.disable_progress_bars()  # Our own bar counts frames; the per-episode Map bars are noise.
+    common = {
+        "frontend_dir": args.frontend, "out": args.out, "repo_id": args.repo_id, "language_dim": args.language_dim,
+        "vision_dim_per_camera": args.vision_dim_per_camera, "batch_size": args.batch_size,
+    }
     try:
-        summary = convert_suite(
-            hdf5_root=args.hdf5_root,
-            suite=args.suite,
-            frontend_dir=args.frontend,
-            out=args.out,
-            repo_id=args.repo_id,
-            language_dim=args.language_dim,
-            vision_dim_per_camera=args.vision_dim_per_camera,
-            image_storage=args.image_storage,
-            batch_size=args.batch_size,
-        )
+        if dataset_source_given(args):
+            summary = convert_dataset(
+                dataset_root=args.dataset_root, dataset_repo_id=args.dataset_repo_id,
+                cameras=parse_cameras(args.cameras), **common,
+            )
+        elif args.hdf5_root is None or args.suite is None:
+            raise ValueError("give --hdf5-root and --suite (LIBERO hdf5), or --dataset-root/--dataset-repo-id.")
+        else:
+            summary = convert_suite(
+                hdf5_root=args.hdf5_root, suite=args.suite, image_storage=args.image_storage, **common
+            )
     except INPUT_ERRORS as err:
         print(f"predvla convert: error: {err}", file=sys.stderr)
         return 2

@@ -1,10 +1,11 @@
-"""`predvla fit-frontend`: fit the frozen front end's PCA bases on LIBERO demonstrations."""
+"""`predvla fit-frontend`: fit the frozen front end's PCA bases on LIBERO demonstrations or a LeRobot dataset."""
 
 import argparse
 import sys
 from dataclasses import fields
 from pathlib import Path
 
+from lerobot_predvla.frontend.dataset_fitting import FitDatasetFrontendConfig, fit_frontend_on_dataset
 from lerobot_predvla.frontend.fitting import FitFrontendConfig, fit_frontend, variance_summary
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import PRECISIONS, VisionWeights, VisionWeightsError
@@ -20,11 +21,12 @@ LANGUAGE_SOURCES = ("demos", "libero")
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "fit-frontend",
-        help="Fit the frozen front end's PCA bases on LIBERO hdf5 demonstrations.",
+        help="Fit the frozen front end's PCA bases on LIBERO hdf5 demonstrations or a LeRobot dataset.",
         description=__doc__,
     )
-    parser.add_argument("--hdf5-root", type=Path, required=True, help="Directory with <suite>/*_demo.hdf5.")
+    parser.add_argument("--hdf5-root", type=Path, default=None, help="Directory with <suite>/*_demo.hdf5.")
     parser.add_argument("--suites", default=",".join(SUITES), help="Comma-separated suites to pool.")
+    add_dataset_source_arguments(parser)
     parser.add_argument(
         "--vision-weights", default="imagenet",
         help="ResNet18 weights: 'imagenet' (paper; needs the torchvision download or cache), a .pth state "
@@ -44,7 +46,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--language-from", choices=LANGUAGE_SOURCES, default="demos",
         help="Instructions the language PCA is fitted on: 'demos' (default; one per pooled demonstration) or "
         "'libero' (all 40 instructions of LIBERO's four suites from its task list, Section 4.1; use it when "
-        "the demonstrations cover fewer suites: one task alone gives all-zero language features).",
+        "the demonstrations cover fewer suites: one task alone gives all-zero language features). With "
+        "--dataset-root/--dataset-repo-id the language PCA is fitted on the dataset's tasks: leave it at 'demos'.",
     )
     parser.add_argument("--out", type=Path, required=True, help="Output directory of the artefact.")
     parser.set_defaults(func=run)
@@ -58,8 +61,41 @@ def _language_instructions(source: str) -> tuple[str, ...] | None:
     return libero_instructions()
 
 
+def add_dataset_source_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options naming an existing LeRobot v3 dataset as input (shared with `predvla convert`)."""
+    parser.add_argument("--dataset-root", type=Path, default=None, help="Local root of a LeRobot v3 dataset.")
+    parser.add_argument(
+        "--dataset-repo-id", default=None,
+        help="Hub repo id of a LeRobot dataset, loaded through LeRobot (needs the Hub); with --dataset-root, "
+        "the id of that local copy.",
+    )
+    parser.add_argument(
+        "--cameras", default=None,
+        help="Comma-separated camera keys to encode, in order (default: every camera of the dataset for "
+        "fit-frontend, the front end's cameras for convert).",
+    )
+
+
+def dataset_source_given(args: argparse.Namespace) -> bool:
+    """Whether the input is a LeRobot dataset; mixing it with LIBERO hdf5 input is an error."""
+    given = args.dataset_root is not None or args.dataset_repo_id is not None
+    if given and args.hdf5_root is not None:
+        raise ValueError("--hdf5-root and --dataset-root/--dataset-repo-id are alternatives; give one.")
+    return given
+
+
+def parse_cameras(spec: str | None) -> list[str] | None:
+    return None if spec is None else [c.strip() for c in spec.split(",") if c.strip()]
+
+
 def run(args: argparse.Namespace) -> int:
     try:
+        if dataset_source_given(args):
+            if args.language_from != "demos":
+                raise ValueError("--language-from applies to --hdf5-root; a dataset's language PCA uses its tasks.")
+            return run_on_dataset(args)
+        if args.hdf5_root is None:
+            raise ValueError("give --hdf5-root (LIBERO hdf5) or --dataset-root/--dataset-repo-id (LeRobot dataset).")
         cfg = FitFrontendConfig(
             hdf5_root=args.hdf5_root,
             suites=tuple(s.strip() for s in args.suites.split(",") if s.strip()),
@@ -81,6 +117,32 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"fitted front end on {fit['num_demos']} demos / {fit['num_frames']} frames of {', '.join(cfg.suites)} "
         f"({fit['num_distinct_instructions']} distinct instructions) in {fit['seconds']} s -> {args.out}"
+    )
+    print(variance_summary(artefact))
+    return 0
+
+
+def run_on_dataset(args: argparse.Namespace) -> int:
+    """`--dataset-root/--dataset-repo-id`: fit on an existing LeRobot dataset; errors are left to `run`."""
+    cfg = FitDatasetFrontendConfig(
+        vision_weights=VisionWeights.parse(args.vision_weights, args.vision_seed),
+        dataset_root=args.dataset_root,
+        dataset_repo_id=args.dataset_repo_id,
+        cameras=parse_cameras(args.cameras),
+        language_dim=args.language_dim,
+        vision_dim_per_camera=args.vision_dim_per_camera,
+        precision=args.precision,
+        image_size=args.image_size,
+        frame_stride=args.frame_stride,
+        batch_size=args.batch_size,
+    )
+    artefact = fit_frontend_on_dataset(cfg)
+    artefact.save(args.out)
+    fit = artefact.fit
+    print(
+        f"fitted front end on {fit['num_demos']} episodes / {fit['num_frames']} frames of {fit['dataset']} "
+        f"(cameras {', '.join(fit['cameras'])}; {fit['num_distinct_instructions']} distinct instructions) in "
+        f"{fit['seconds']} s -> {args.out}"
     )
     print(variance_summary(artefact))
     return 0

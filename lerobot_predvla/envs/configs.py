@@ -14,9 +14,12 @@ vectorisation, and changes three things:
 
 LeRobot's own `--env.type=libero` works too: LeRobot 0.6.1 chooses env processors by policy config in
 `make_env_pre_post_processors` (it special-cases X-VLA there) and offers plugins no hook, so importing this
-module wraps that function the same way for this plugin's policies. With the `libero` env type they get
-`PredVLALiberoProcessorStep` instead of LeRobot's `LiberoProcessorStep`; every other policy and env type gets
-LeRobot's processors unchanged. The other two changes above are not available there (every step is
+module wraps that function the same way for this plugin's policies. With the `libero` env type, the choice
+follows the state the policy was trained on: a 9-dim state (joints + gripper, LIBERO's hdf5 demonstrations
+through `predvla convert --hdf5-root`) gets `PredVLALiberoProcessorStep` instead of LeRobot's
+`LiberoProcessorStep`; an 8-dim state (LeRobot's community LIBERO datasets through `predvla convert
+--dataset-root`) gets LeRobot's own processor unchanged. Every other policy and env type gets LeRobot's
+processors unchanged. The other two changes above are not available there (every step is
 rendered, at 360 px unless `--env.observation_height/width=128`), so `predvla_libero` stays the default.
 """
 
@@ -34,6 +37,7 @@ from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
 
 JOINT_DIM, GRIPPER_DIM = 7, 2
+LEROBOT_LIBERO_STATE_DIM = 8  # LeRobot's LiberoProcessorStep: eef position 3 + axis-angle 3 + gripper 2
 OBS_ROBOT_STATE = "observation.robot_state"
 
 
@@ -114,8 +118,21 @@ _lerobot_make_env_pre_post_processors = lerobot.envs.factory.make_env_pre_post_p
 
 def make_env_pre_post_processors(env_cfg: EnvConfig, policy_cfg) -> tuple:
     """LeRobot's `make_env_pre_post_processors`, with PredVLA's LIBERO step for this plugin's policies."""
-    if type(env_cfg) is LiberoEnv and isinstance(policy_cfg, CachedFeaturesConfig):
-        return libero_env_processors()
+    ours = isinstance(policy_cfg, CachedFeaturesConfig)
+    if isinstance(env_cfg, PredVLALiberoEnv) and ours and policy_cfg.proprio_dim != JOINT_DIM + GRIPPER_DIM:
+        raise ValueError(
+            f"--env.type={EVAL_ENV_TYPE} gives a joints + gripper state ({JOINT_DIM + GRIPPER_DIM}); this policy was "
+            f"trained on a {policy_cfg.proprio_dim}-dim observation.state: evaluate it with --env.type=libero."
+        )
+    if type(env_cfg) is LiberoEnv and ours:
+        if policy_cfg.proprio_dim == JOINT_DIM + GRIPPER_DIM:
+            return libero_env_processors()
+        if policy_cfg.proprio_dim != LEROBOT_LIBERO_STATE_DIM:
+            raise ValueError(
+                f"This policy was trained on a {policy_cfg.proprio_dim}-dim observation.state; LIBERO offers joints + "
+                f"gripper ({JOINT_DIM + GRIPPER_DIM}, LIBERO's hdf5 demonstrations) or LeRobot's end-effector state "
+                f"({LEROBOT_LIBERO_STATE_DIM}, the community LeRobot datasets)."
+            )
     return _lerobot_make_env_pre_post_processors(env_cfg, policy_cfg)
 
 

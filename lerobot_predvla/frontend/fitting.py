@@ -17,6 +17,9 @@ from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
 from lerobot_predvla.libero.protocol import SUITES
 from lerobot_predvla.utils.versions import package_versions
 
+# The libraries that determine the features, recorded with every fit.
+FRONTEND_DISTRIBUTIONS = ("torch", "torchvision", "sentence-transformers", "scikit-learn", "lerobot")
+
 
 @dataclass
 class FitFrontendConfig:
@@ -99,7 +102,7 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
             "num_distinct_instructions": len(set(instructions)),
             "language_fit_on": "task list" if cfg.language_instructions else "demonstrations",
             "seconds": round(time.perf_counter() - start, 1),
-            "versions": package_versions(("torch", "torchvision", "sentence-transformers", "scikit-learn", "lerobot")),
+            "versions": package_versions(FRONTEND_DISTRIBUTIONS),
         },
     )
 

@@ -89,7 +89,8 @@ class FrontendProcessorStep(ProcessorStep):
             if missing:
                 raise KeyError(
                     f"PredVLA's front end needs the camera images {missing}; the observation has "
-                    f"{sorted(observation)}. Evaluate with --env.type=predvla_libero (or libero)."
+                    f"{sorted(observation)}. On a robot, name its cameras as in the training dataset; in LIBERO, "
+                    "evaluate with --env.type=predvla_libero (or libero)."
                 )
             images = {key: observation[key] for key in frontend.artefact.cameras}
             with torch.no_grad():

@@ -51,12 +51,22 @@ MINILM_PARAMS = 22_713_216
 FRONTEND_STEP = "predvla_frontend_processor"
 _LEFTOVER = re.compile(r"\$\{?[A-Za-z_][A-Za-z0-9_]*\}?|\{\{|\}\}")
 _FEATURE_MEANING = {
-    "observation.vision_features": "ResNet18 features of both cameras, PCA per camera (cached or computed by the "
+    "observation.vision_features": "ResNet18 features of each camera, PCA per camera (cached or computed by the "
     "front end)",
     "observation.language_features": "all-MiniLM-L6-v2 instruction embedding, PCA",
-    "observation.state": "proprioception: joint positions (7) + gripper (2)",
-    "action": "delta end-effector action (LIBERO, 7)",
 }
+# Meanings of the state and action by size: LIBERO's layouts; any other robot's are the dataset's own.
+_SIZED_MEANING = {
+    ("observation.state", 9): "proprioception: joint positions (7) + gripper (2)",
+    ("observation.state", 8): "proprioception: end-effector position (3) + axis-angle (3) + gripper (2)",
+    ("action", 7): "delta end-effector action (LIBERO, 7)",
+}
+
+
+def feature_meaning(key: str, feature: dict) -> str:
+    """What a policy input or output is, for the card's table."""
+    sized = _SIZED_MEANING.get((key, int(feature["shape"][0])))
+    return _FEATURE_MEANING.get(key) or sized or f"the training dataset's `{key}` ({feature['type'].lower()})"
 
 
 class HubError(ValueError):
@@ -196,8 +206,11 @@ def _frontend_section(meta: dict | None) -> tuple[str, str]:
 def _format_fit(fit: dict) -> str:
     if not fit:
         return "not recorded"
-    keys = ("suites", "demonstrations", "frames", "instructions")
-    parts = [f"{k}: {', '.join(map(str, v)) if isinstance(v, list) else v}" for k in keys if (v := fit.get(k))]
+    # The fit records of `predvla fit-frontend` on LIBERO hdf5 (suites) or on a LeRobot dataset (dataset).
+    keys = {"suites": "suites", "dataset": "dataset", "num_demos": "demonstrations", "num_frames": "frames",
+            "num_distinct_instructions": "instructions"}
+    parts = [f"{name}: {', '.join(map(str, v)) if isinstance(v, list) else v}"
+             for k, name in keys.items() if (v := fit.get(k))]
     return "; ".join(parts) or "not recorded"
 
 
@@ -352,7 +365,7 @@ def render_card(
         "minilm_params": f"{MINILM_PARAMS:,}",
         "pca_values": pca_values,
         "io_rows": "\n".join(
-            f"| `{key}` | {tuple(ft['shape'])} | {_FEATURE_MEANING.get(key, ft['type'].lower())} |"
+            f"| `{key}` | {tuple(ft['shape'])} | {feature_meaning(key, ft)} |"
             for key, ft in features.items()
         ),
         "frontend_section": frontend_section,

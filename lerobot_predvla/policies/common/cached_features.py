@@ -5,7 +5,7 @@ PredVLA (`predvla`, `predvla_ladder`) and the observation-driven baselines (`pre
 actions with the same Gaussian-mixture head and train on whole episodes held in memory.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from lerobot.configs import PreTrainedConfig
@@ -17,6 +17,8 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 OBS_VISION_FEATURES = "observation.vision_features"
 OBS_LANGUAGE_FEATURES = "observation.language_features"
 FRONTEND_META_DIR = "meta/predvla_frontend"  # the front-end artefact copy a converted dataset carries
+# The sizes a policy takes from its dataset's features; Table 1's defaults are LIBERO's Panda.
+LAYOUT_FIELDS = ("num_cameras", "proprio_dim", "action_dim", "vision_dim_per_camera", "language_dim")
 
 
 def cached_feature_normalization() -> dict[str, NormalizationMode]:
@@ -47,9 +49,11 @@ class CachedFeaturesConfig(PreTrainedConfig):
     Args:
         language_dim: Language representation size after PCA (Table 1: 384 -> 64).
         vision_dim_per_camera: Visual PCA components per camera (Table 1: 512 -> 96).
-        num_cameras: Number of camera views whose features are concatenated (Table 1: 2).
-        proprio_dim: Proprioceptive dimension, joints 7 + gripper 2 (Table 1: 9).
-        action_dim: Action dimension (Table 1: 7).
+        num_cameras: Number of camera views whose features are concatenated (Table 1: 2); set from the
+            dataset's `observation.vision_features` (see `validate_cached_features`).
+        proprio_dim: Proprioceptive dimension, joints 7 + gripper 2 (Table 1: 9); set from the dataset's
+            `observation.state` (e.g. 8 for LeRobot's community LIBERO datasets, 6 for an SO-101).
+        action_dim: Action dimension (Table 1: 7); set from the dataset's `action`.
         visual_refresh_interval: A fresh visual observation arrives every this many control steps and is held
             in between (Table 1: 4).
         frontend_dir: Front-end artefact (`predvla fit-frontend`) that encodes live observations at
@@ -126,33 +130,68 @@ class CachedFeaturesConfig(PreTrainedConfig):
         return None
 
 
+def feature_layout(config: CachedFeaturesConfig) -> str:
+    """The input and output sizes a policy was built for, e.g. "2 cameras x 96, state 9, action 7, language 64"."""
+    return (
+        f"{config.num_cameras} camera{'s' if config.num_cameras != 1 else ''} x {config.vision_dim_per_camera}, "
+        f"state {config.proprio_dim}, action {config.action_dim}, language {config.language_dim}"
+    )
+
+
+def has_paper_layout(config: CachedFeaturesConfig) -> bool:
+    """Whether the sizes are Table 1's (LIBERO's Panda), where the paper's parameter counts apply."""
+    defaults = {f.name: f.default for f in fields(type(config))}
+    return all(getattr(config, name) == defaults[name] for name in LAYOUT_FIELDS)
+
+
 def validate_cached_features(config: CachedFeaturesConfig, policy_name: str) -> None:
-    """Check (and, for a bare config, set) the cached front-end inputs and the action output."""
-    expected = {
-        OBS_VISION_FEATURES: config.vision_dim,
-        OBS_LANGUAGE_FEATURES: config.language_dim,
-        OBS_STATE: config.proprio_dim,
-    }
+    """Take the sizes from the features (or, for a bare config, set the features from the sizes) and check them.
+
+    Built from a dataset (or a checkpoint), the policy follows its features: `proprio_dim` is the size of
+    `observation.state`, `action_dim` that of `action`, and `num_cameras` the size of
+    `observation.vision_features` over `vision_dim_per_camera`, so any robot's layout works. The language
+    size is the front end's and must match `language_dim`.
+    """
     if not config.input_features:  # A bare config: the inputs are fixed by the dimensions.
         config.input_features = {
-            key: PolicyFeature(type=FeatureType.STATE, shape=(dim,)) for key, dim in expected.items()
+            OBS_VISION_FEATURES: PolicyFeature(type=FeatureType.STATE, shape=(config.vision_dim,)),
+            OBS_LANGUAGE_FEATURES: PolicyFeature(type=FeatureType.STATE, shape=(config.language_dim,)),
+            OBS_STATE: PolicyFeature(type=FeatureType.STATE, shape=(config.proprio_dim,)),
         }
-    for key, dim in expected.items():
-        feature = config.input_features.get(key)
-        if feature is None:
-            raise ValueError(
-                f"{policy_name} needs the input feature '{key}' of shape ({dim},); the dataset or environment "
-                f"provides {sorted(config.input_features)}. Convert LIBERO data with `predvla convert`."
-            )
-        if tuple(feature.shape) != (dim,):
-            raise ValueError(f"Input feature '{key}' must have shape ({dim},), got {tuple(feature.shape)}.")
     if not config.output_features:
         config.output_features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(config.action_dim,))}
-    action = config.output_features.get(ACTION)
-    if action is None or tuple(action.shape) != (config.action_dim,):
-        shape = None if action is None else tuple(action.shape)
-        raise ValueError(f"Output feature '{ACTION}' must have shape ({config.action_dim},), got {shape}.")
+    sizes = {}
+    for key, features in (
+        (OBS_VISION_FEATURES, config.input_features),
+        (OBS_LANGUAGE_FEATURES, config.input_features),
+        (OBS_STATE, config.input_features),
+        (ACTION, config.output_features),
+    ):
+        feature = features.get(key)
+        if feature is None:
+            raise ValueError(
+                f"{policy_name} needs the feature '{key}'; the dataset or environment provides "
+                f"{sorted(features)}. Add the cached columns with `predvla convert` (docs/own_dataset.md)."
+            )
+        if len(feature.shape) != 1:
+            raise ValueError(f"Feature '{key}' must be a vector, got shape {tuple(feature.shape)}.")
+        sizes[key] = int(feature.shape[0])
+    if sizes[OBS_VISION_FEATURES] % config.vision_dim_per_camera:
+        raise ValueError(
+            f"'{OBS_VISION_FEATURES}' has {sizes[OBS_VISION_FEATURES]} dimensions, not a multiple of "
+            f"vision_dim_per_camera={config.vision_dim_per_camera}."
+        )
+    if sizes[OBS_LANGUAGE_FEATURES] != config.language_dim:
+        raise ValueError(
+            f"'{OBS_LANGUAGE_FEATURES}' has {sizes[OBS_LANGUAGE_FEATURES]} dimensions, language_dim is "
+            f"{config.language_dim}."
+        )
+    config.num_cameras = sizes[OBS_VISION_FEATURES] // config.vision_dim_per_camera
+    config.proprio_dim = sizes[OBS_STATE]
+    config.action_dim = sizes[ACTION]
     # Only the cached features are inputs; images and other columns are not part of the policy.
     config.input_features = {
-        key: PolicyFeature(type=FeatureType.STATE, shape=(dim,)) for key, dim in expected.items()
+        key: PolicyFeature(type=FeatureType.STATE, shape=(sizes[key],))
+        for key in (OBS_VISION_FEATURES, OBS_LANGUAGE_FEATURES, OBS_STATE)
     }
+    config.output_features = {ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(config.action_dim,))}

@@ -19,6 +19,8 @@ from lerobot_predvla.policies.common.cached_features import (
     OBS_LANGUAGE_FEATURES,
     OBS_VISION_FEATURES,
     CachedFeaturesConfig,
+    feature_layout,
+    has_paper_layout,
     use_dataset_frontend,
 )
 from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
@@ -80,12 +82,13 @@ class ObservationPolicy(PreTrainedPolicy):
             self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
 
     def log_parameter_count(self) -> None:
-        """Start-up line: our trainable parameters beside the paper's (Tables 4 and 5)."""
+        """Start-up line: our trainable parameters and layout, beside the paper's count at its layout (Tables 4
+        and 5)."""
         ours = count_parameters(self)
-        paper = "" if self.paper_parameters is None else (
-            f" (paper: {self.paper_parameters:,}, {100 * (ours - self.paper_parameters) / self.paper_parameters:+.2f}%)"
+        paper = "" if self.paper_parameters is None or not has_paper_layout(self.config) else (
+            f"; paper: {self.paper_parameters:,}, {100 * (ours - self.paper_parameters) / self.paper_parameters:+.2f}%"
         )
-        logging.info("%s: %s trainable parameters%s", self.name, f"{ours:,}", paper)
+        logging.info("%s: %s trainable parameters (%s%s)", self.name, f"{ours:,}", feature_layout(self.config), paper)
 
     def get_optim_params(self) -> list[dict]:
         return [{"params": [p for p in self.parameters() if p.requires_grad]}]

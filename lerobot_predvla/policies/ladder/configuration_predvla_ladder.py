@@ -8,11 +8,11 @@ from dataclasses import dataclass
 
 from lerobot.configs import PreTrainedConfig
 
-from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla.configuration_predvla import PREDVLA_PAPER_PARAMETERS, PredVLAConfig
 
 LADDER_RUNGS = ("L2", "L2b", "L3", "L4", "L5")
 LADDER_WIDTHS = {"L2": 256, "L2b": 256, "L3": 301, "L4": 301, "L5": 142}  # Section 4.5: d per rung
-LADDER_PAPER_PARAMETERS = {"L2": 675_732, "L2b": 724_884, "L3": 674_560, "L4": 674_560, "L5": 676_928}
+LADDER_PAPER_PARAMETERS = {"L2": PREDVLA_PAPER_PARAMETERS, "L2b": 724_884, "L3": 674_560, "L4": 674_560, "L5": 676_928}
 PREDICTIVE_RUNGS = ("L2", "L2b")  # the network still predicts vision and proprioception
 
 

@@ -13,6 +13,7 @@ LONG_HORIZON_TAU = (30.0, 14.0, 8.0, 2.0)
 LONG_HORIZON_SEQUENCE_LENGTH = 500
 CORRUPTION_CHANNELS = ("vision", "proprio")
 COMPLEXITY_REDUCTIONS = ("sum", "mean")  # training C of Eq. 10: summed over the sequence, or its mean
+PREDVLA_PAPER_PARAMETERS = 675_732  # Table 1, at the paper's LIBERO layout (2 cameras, proprio 9, action 7)
 
 
 @PreTrainedConfig.register_subclass("predvla")
@@ -26,7 +27,9 @@ class PredVLAConfig(CachedFeaturesConfig):
 
     Inputs are the cached front-end features, never raw images: `observation.vision_features` (two
     cameras x 96 PCA components), `observation.language_features` (64 PCA components of the
-    all-MiniLM-L6-v2 instruction embedding) and `observation.state` (7 joints + 2 gripper). The network
+    all-MiniLM-L6-v2 instruction embedding) and `observation.state` (7 joints + 2 gripper). Built from a
+    dataset, `num_cameras`, `proprio_dim` and `action_dim` follow its features (any robot; see
+    `validate_cached_features`); the parameter count follows and is logged. The network
     never receives them as inputs: vision and proprioception only enter the free energy minimised by
     error regression; language enters the top module T (Eq. 4).
 

@@ -1,5 +1,6 @@
 """PredVLA policy for LeRobot: training with per-episode posteriors (Eq. 10), acting by error regression."""
 
+import logging
 import tempfile
 from pathlib import Path
 
@@ -12,9 +13,11 @@ from torch import Tensor
 from lerobot_predvla.policies.common.cached_features import (
     OBS_LANGUAGE_FEATURES,
     OBS_VISION_FEATURES,
+    feature_layout,
+    has_paper_layout,
     use_dataset_frontend,
 )
-from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla.configuration_predvla import PREDVLA_PAPER_PARAMETERS, PredVLAConfig
 from lerobot_predvla.policies.predvla.corruption import ObservationCorruption
 from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
@@ -41,7 +44,8 @@ class PredVLAPolicy(PreTrainedPolicy):
 
     Built by `lerobot-train` with the dataset's metadata, it holds the training posteriors of every
     episode (`posterior_store`) and the episodes' cached feature columns in memory. Built from a
-    checkpoint for evaluation, it holds only the 675,732-parameter network.
+    checkpoint for evaluation, it holds only the network (675,732 parameters at the paper's LIBERO layout; the
+    sizes of the inputs and the action follow the dataset's features).
     """
 
     config_class = PredVLAConfig
@@ -52,6 +56,9 @@ class PredVLAPolicy(PreTrainedPolicy):
         config.validate_features()
         self.config = config
         self.model = PredictiveModel(config)
+        count = sum(p.numel() for p in self.network_parameters())
+        paper = f"; Table 1: {PREDVLA_PAPER_PARAMETERS:,}" if has_paper_layout(config) else ""
+        logging.info("PredVLA: %s trainable parameters (%s%s)", f"{count:,}", feature_layout(config), paper)
         self.sequences: EpisodeSequences | None = None
         self.posterior_store: PosteriorStore | None = None
         if dataset_meta is not None:

@@ -6,9 +6,9 @@ import torch
 from lerobot.processor import PolicyAction, PolicyProcessorPipeline
 from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
 
-from lerobot_predvla.frontend.artefact import FrontendArtefact
+from lerobot_predvla.frontend.artefact import FrontendArtefact, FrontendArtefactError
 from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
-from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
+from lerobot_predvla.policies.common.cached_features import OBS_VISION_FEATURES, CachedFeaturesConfig
 
 
 def frontend_step(config: CachedFeaturesConfig) -> FrontendProcessorStep:
@@ -19,6 +19,11 @@ def frontend_step(config: CachedFeaturesConfig) -> FrontendProcessorStep:
     artefact.check_dims(
         config.language_dim, config.vision_dim_per_camera, list(artefact.cameras), config.frontend_dir
     )
+    if len(artefact.cameras) != config.num_cameras:
+        raise FrontendArtefactError(
+            f"{config.frontend_dir}: the front end encodes {len(artefact.cameras)} cameras {list(artefact.cameras)}, "
+            f"the policy was built for {config.num_cameras} (its '{OBS_VISION_FEATURES}' features)."
+        )
     return FrontendProcessorStep.from_artefact(artefact)
 
 
