@@ -19,6 +19,8 @@ LONG_HORIZON_TAU = (30.0, 14.0, 8.0, 2.0)
 LONG_HORIZON_SEQUENCE_LENGTH = 500
 CORRUPTION_CHANNELS = ("vision", "proprio")
 COMPLEXITY_REDUCTIONS = ("sum", "mean")  # training C of Eq. 10: summed over the sequence, or its mean
+BAD_OBSERVATION_MODES = ("mask", "raise")  # acting on a missing or non-finite observation channel
+NONFINITE_TRAINING_MODES = ("stop", "skip")  # training on a batch with a non-finite loss or gradient
 
 
 def cached_feature_normalization() -> dict[str, NormalizationMode]:
@@ -30,6 +32,18 @@ def cached_feature_normalization() -> dict[str, NormalizationMode]:
         "ENV": NormalizationMode.IDENTITY,
         "ACTION": NormalizationMode.MIN_MAX,
     }
+
+
+def check_fault_modes(config) -> None:
+    """Validate `on_bad_observation` and `on_nonfinite_training` (PredVLA and the baselines)."""
+    if config.on_bad_observation not in BAD_OBSERVATION_MODES:
+        raise ValueError(
+            f"`on_bad_observation` must be one of {BAD_OBSERVATION_MODES}, got {config.on_bad_observation!r}."
+        )
+    if config.on_nonfinite_training not in NONFINITE_TRAINING_MODES:
+        raise ValueError(
+            f"`on_nonfinite_training` must be one of {NONFINITE_TRAINING_MODES}, got {config.on_nonfinite_training!r}."
+        )
 
 
 def use_dataset_frontend(config, dataset_root: Path) -> None:
@@ -121,6 +135,15 @@ class PredVLAConfig(PreTrainedConfig):
             observations (an unrelated episode); required with `er_corruption_channel`.
         er_corruption_episode: Episode of `er_corruption_root` whose observations replace the live ones: step t
             of the live episode receives its step t (its last step once it has ended).
+        on_bad_observation: What acting does with a missing or non-finite observation channel (vision
+            features, proprioception) of one environment at one control step. "mask" (default): its
+            prediction error is left out of that step's free energy (Section 3.3), counted and logged once per
+            episode; the action stays finite. "raise": stop with an error naming the channel, environment and
+            step (for users who would rather stop the robot). See docs/reliability.md.
+        on_nonfinite_training: What training does when a batch's loss or gradient is non-finite. "stop"
+            (default): lerobot-train stops with one line naming the step and the loss terms, before any
+            checkpoint is written. "skip": the batch changes no weight and no posterior; it is counted and
+            logged.
     """
 
     # Front end (Table 1).
@@ -170,6 +193,9 @@ class PredVLAConfig(PreTrainedConfig):
     er_corruption_alpha: float = 0.0
     er_corruption_root: str | None = None
     er_corruption_episode: int = 0
+    # Faults and bad input (docs/reliability.md).
+    on_bad_observation: str = "mask"
+    on_nonfinite_training: str = "stop"
 
     normalization_mapping: dict[str, NormalizationMode] = field(default_factory=cached_feature_normalization)
 
@@ -196,6 +222,7 @@ class PredVLAConfig(PreTrainedConfig):
             raise ValueError(f"`visual_refresh_interval` must be >= 1, got {self.visual_refresh_interval}.")
         if self.sequence_length < 1:
             raise ValueError(f"`sequence_length` must be >= 1, got {self.sequence_length}.")
+        check_fault_modes(self)
         if self.er_corruption_channel not in (None, *CORRUPTION_CHANNELS):
             raise ValueError(
                 f"`er_corruption_channel` must be one of {CORRUPTION_CHANNELS} or None, "

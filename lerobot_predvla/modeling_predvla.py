@@ -12,6 +12,7 @@ from torch import Tensor
 from .configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, PredVLAConfig, use_dataset_frontend
 from .corruption import ObservationCorruption
 from .error_regression import ErrorRegression
+from .observation_guard import ObservationGuard
 from .posterior_store import PosteriorStore
 from .predictive_model import PredictiveModel
 from .sequence_table import EpisodeSequences
@@ -182,23 +183,35 @@ class PredVLAPolicy(PreTrainedPolicy):
 
     # ----- acting --------------------------------------------------------------------------------------
     def reset(self) -> None:
-        """Clear the error-regression window (called at every environment reset)."""
+        """Clear the error-regression window (called at every environment reset); log the finished episode's
+        unavailable observations, if any."""
         self.error_regression = ErrorRegression(self.model)
         self.control_step = 0
+        if not hasattr(self, "guard"):
+            cfg = self.config
+            self.guard = ObservationGuard(
+                (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE),
+                (cfg.language_dim, cfg.vision_dim, cfg.proprio_dim), cfg.on_bad_observation, self.name,
+            )
+        self.guard.reset()
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
         return self.select_action(batch)[:, None]
 
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
-        """One control step of error regression; works under lerobot-eval's `torch.inference_mode()`."""
+        """One control step of error regression; works under lerobot-eval's `torch.inference_mode()`.
+
+        A missing or non-finite vision or proprio row is masked out of that environment's free energy
+        (`on_bad_observation`); the returned action is always finite.
+        """
         if self.corruption is not None:  # the corrupted observation is what error regression sees
             batch = self.corruption(self.control_step, batch)
         self.control_step += 1
+        (language, vision, proprio), (_, vision_ok, proprio_ok) = self.guard(batch)
         with torch.inference_mode(False), torch.enable_grad():
             # Inputs created in inference mode cannot enter autograd: clone them out of it.
-            inputs = [batch[k].clone() for k in (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE)]
-            inputs = [x[None] if x.dim() == 1 else x for x in inputs]
-            action = self.error_regression(*inputs)
-        return action.detach()
+            inputs = [x.clone() for x in (language, vision, proprio, vision_ok, proprio_ok)]
+            action = self.error_regression(*inputs).detach()
+            return self.guard.safe_action(action, self.error_regression.prior_action.detach())
 

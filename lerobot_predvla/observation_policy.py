@@ -3,7 +3,8 @@
 They read the same cached front-end columns as PredVLA (Sections 4.1, 4.4), train on whole episodes held in
 memory (`EpisodeSequences`) with the negative log-likelihood of the same Gaussian-mixture action head, and
 act without error regression. Vision is refreshed every `visual_refresh_interval` control steps and held in
-between, in training and at evaluation alike.
+between, in training and at evaluation alike. A missing or non-finite observation (`ObservationGuard`) is not
+an input: the environment keeps its last available frame of that channel (zeros before the first).
 """
 
 import logging
@@ -22,9 +23,11 @@ from .configuration_predvla import (
     OBS_LANGUAGE_FEATURES,
     OBS_VISION_FEATURES,
     cached_feature_normalization,
+    check_fault_modes,
     use_dataset_frontend,
     validate_cached_features,
 )
+from .observation_guard import ObservationGuard
 from .sequence_table import EpisodeSequences
 
 BASELINE_TRAIN_STEPS = 50_000  # Section 4.4: baselines train for 50,000 steps (PredVLA: 30,000)
@@ -70,6 +73,10 @@ class ObservationPolicyConfig(PreTrainedConfig):
             (values not given): sweep it with `--policy.optimizer_lr`.
         optimizer_weight_decay: Adam weight decay (Table 2: 1e-4).
         grad_clip_norm: Gradient-norm clip (PredVLA's 1.0).
+        on_bad_observation: "mask" (default): a missing or non-finite observation channel is replaced by the
+            environment's last available one; "raise": stop with an error. As PredVLAConfig.
+        on_nonfinite_training: "stop" (default) or "skip" a batch with a non-finite loss or gradient. As
+            PredVLAConfig.
     """
 
     language_dim: int = 64
@@ -88,6 +95,8 @@ class ObservationPolicyConfig(PreTrainedConfig):
     optimizer_lr: float = 1e-4
     optimizer_weight_decay: float = 1e-4
     grad_clip_norm: float = 1.0
+    on_bad_observation: str = "mask"
+    on_nonfinite_training: str = "stop"
 
     # Same normalisation as PredVLA: identity features, actions min-max scaled to [-1, 1].
     normalization_mapping: dict[str, NormalizationMode] = field(default_factory=cached_feature_normalization)
@@ -99,6 +108,7 @@ class ObservationPolicyConfig(PreTrainedConfig):
                 f"`visual_refresh_interval` and `sequence_length` must be >= 1, got {self.visual_refresh_interval}"
                 f" and {self.sequence_length}."
             )
+        check_fault_modes(self)
 
     @property
     def vision_dim(self) -> int:
@@ -191,20 +201,34 @@ class ObservationPolicy(PreTrainedPolicy):
     # ----- acting ------------------------------------------------------------------------------------------
     def reset(self) -> None:
         self.control_step = 0
-        self.vision: Tensor | None = None  # the latest refreshed frame
+        # The latest available inputs per environment: the refreshed frame, proprioception and language.
+        self.held: list[Tensor] | None = None
+        if not hasattr(self, "guard"):
+            cfg = self.config
+            self.guard = ObservationGuard(
+                (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE),
+                (cfg.language_dim, cfg.vision_dim, cfg.proprio_dim), cfg.on_bad_observation, self.name,
+            )
+        self.guard.reset()
 
     def observe(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor, Tensor]:
-        """(language, held vision, proprio) of this control step, each (batch, dim)."""
-        inputs = [batch[k] for k in (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE)]
-        language, vision, proprio = [x[None] if x.dim() == 1 else x for x in inputs]
-        if self.control_step % self.config.visual_refresh_interval == 0:
-            self.vision = vision
+        """(language, held vision, proprio) of this control step, each (batch, dim); an unavailable row keeps
+        the environment's last available value."""
+        values, available = self.guard(batch)
+        if self.held is None:
+            self.held = values  # unavailable rows are zeros
+        refresh = self.control_step % self.config.visual_refresh_interval == 0
+        self.held = [
+            torch.where(ok[:, None], new, old) if (i != 1 or refresh) else old
+            for i, (new, old, ok) in enumerate(zip(values, self.held, available, strict=True))
+        ]
         self.control_step += 1
-        return language, self.vision, proprio
+        return tuple(self.held)
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
-        return self.act(*self.observe(batch))
+        """The action of this control step, always finite (`ObservationGuard.safe_action`)."""
+        return self.guard.safe_action(self.act(*self.observe(batch)))
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:

@@ -1,0 +1,160 @@
+"""Faults and bad input at acting time (docs/reliability.md): no non-finite value ever reaches an action."""
+
+import logging
+
+import pytest
+import torch
+from test_policy import randomised_policy, run, stream
+
+from lerobot_predvla.configuration_predvla_ladder import PredVLALadderConfig
+from lerobot_predvla.modeling_predvla_bc_rnn import PredVLABCRNNConfig, PredVLABCRNNPolicy
+from lerobot_predvla.modeling_predvla_bc_transformer import PredVLABCTransformerConfig, PredVLABCTransformerPolicy
+from lerobot_predvla.modeling_predvla_ladder import PredVLALadderPolicy
+from lerobot_predvla.observation_guard import FALLBACK, BadObservationError
+
+VISION, STATE, LANGUAGE = "observation.vision_features", "observation.state", "observation.language_features"
+
+
+def spoil(observations: list[dict], step: int, key: str, env: int | None, value: float = float("nan")) -> list[dict]:
+    """A copy of the stream with one environment's row (or, env=None, the whole key) spoiled at one step."""
+    out = [dict(o) for o in observations]
+    if env is None:
+        del out[step][key]
+    else:
+        x = out[step][key].clone()
+        x[env, 3] = value
+        out[step][key] = x
+    return out
+
+
+def assert_window_finite(policy) -> None:
+    er = policy.error_regression
+    assert all(torch.isfinite(c).all() for c in er.posteriors)
+    state = er.state
+    assert all(torch.isfinite(x).all() for x in (*state.h, *state.d, state.a_hat, state.q_hat))
+
+
+@pytest.mark.parametrize(("key", "value"), [(VISION, float("nan")), (STATE, float("inf")), (STATE, float("-inf")),
+                                            (VISION, float("inf"))])
+def test_a_bad_value_never_reaches_actions_posteriors_or_state(key, value):
+    policy = randomised_policy(er_iterations=3, er_window=6)
+    clean = stream(14)
+    actions = run(policy, spoil(clean, 4, key, 0, value))  # step 4 is a visual refresh
+    assert torch.isfinite(actions).all()
+    assert_window_finite(policy)
+    assert policy.guard.counts[key].tolist() == [1] and policy.guard.totals[FALLBACK] == 0
+    reference = run(policy, clean)
+    assert torch.equal(actions[:4], reference[:4])
+    assert not torch.equal(actions[4:], reference[4:])  # masked, not ignored: inference differs from then on
+
+
+def test_masking_equals_a_missing_observation():
+    """A non-finite row is treated exactly as a missing key: its error leaves the free energy."""
+    policy = randomised_policy(er_iterations=3, er_window=6)
+    clean = stream(10)
+    for key in (VISION, STATE):
+        assert torch.equal(run(policy, spoil(clean, 4, key, 0)), run(policy, spoil(clean, 4, key, None)))
+
+
+def test_a_bad_frame_between_refreshes_changes_nothing():
+    """Vision of a non-refresh step never enters the free energy, so even NaN there changes no bit."""
+    policy = randomised_policy(er_iterations=3, er_window=6)
+    clean = stream(10)
+    assert torch.equal(run(policy, spoil(clean, 5, VISION, 0)), run(policy, clean))
+
+
+def test_one_environments_bad_frames_change_nothing_for_the_others():
+    policy = randomised_policy(er_iterations=3, er_window=6)
+    clean = stream(16, batch=3, seed=7)
+    bad = spoil(spoil(spoil(clean, 4, VISION, 1), 6, STATE, 1), 9, STATE, 1, float("inf"))
+    actions = run(policy, bad)
+    assert policy.guard.counts[VISION].tolist() == [0, 1, 0] and policy.guard.counts[STATE].tolist() == [0, 2, 0]
+    reference = run(policy, clean)
+    assert torch.isfinite(actions).all()
+    assert torch.equal(actions[:, [0, 2]], reference[:, [0, 2]])  # bit for bit
+    assert not torch.equal(actions[:, 1], reference[:, 1])
+
+
+def test_counts_are_reported_once_per_episode(caplog):
+    policy = randomised_policy(er_iterations=1, er_window=4)
+    with caplog.at_level(logging.WARNING):
+        run(policy, spoil(spoil(stream(8, batch=2), 0, VISION, 1), 2, STATE, None))
+        run(policy, stream(3, batch=2))  # the reset at its start reports the previous episode
+        run(policy, stream(3, batch=2))  # a clean episode reports nothing
+    lines = [r.getMessage() for r in caplog.records if "unavailable" in r.getMessage()]
+    assert len(lines) == 1, lines
+    assert f"{VISION} unavailable (masked) at 1 env-steps (per env [0, 1])" in lines[0]
+    assert f"{STATE} unavailable (masked) at 2 env-steps (per env [1, 1])" in lines[0]
+    assert policy.guard.totals[VISION] == 1 and policy.guard.totals[STATE] == 2
+
+
+def test_raise_mode_stops_with_a_clear_error():
+    policy = randomised_policy(er_iterations=1, er_window=4, on_bad_observation="raise")
+    with pytest.raises(BadObservationError, match=rf"'{STATE}' of environment 1 is non-finite at control step 3"):
+        run(policy, spoil(stream(6, batch=2), 3, STATE, 1))
+    with pytest.raises(BadObservationError, match=rf"'{VISION}' of environment 0 is missing at control step 2"):
+        run(policy, spoil(stream(6, batch=2), 2, VISION, None))
+    with pytest.raises(ValueError, match="on_bad_observation"):
+        randomised_policy(on_bad_observation="ignore")
+
+
+def test_diverging_inference_reverts_to_the_prior():
+    """Should error regression itself diverge (here an infinite step size), posteriors revert to their values
+    before the update and the action stays finite."""
+    policy = randomised_policy(er_iterations=2, er_window=4, er_lr=float("inf"))
+    actions = run(policy, stream(6, batch=2))
+    assert torch.isfinite(actions).all()
+    assert_window_finite(policy)
+    assert policy.error_regression.reverted == 12
+    open_loop = run(randomised_policy(er_iterations=0), stream(6, batch=2))
+    torch.testing.assert_close(actions, open_loop, rtol=1e-5, atol=1e-5)
+
+
+def test_a_nonfinite_action_falls_back_to_the_open_loop_action(monkeypatch):
+    policy = randomised_policy(er_iterations=1, er_window=4)
+    policy.reset()
+    real_act = type(policy.error_regression).act
+
+    def act_with_nan(er):
+        action = real_act(er).clone()
+        action[1] = float("nan")
+        return action
+
+    monkeypatch.setattr(type(policy.error_regression), "act", act_with_nan)
+    with torch.inference_mode():
+        action = policy.select_action(stream(1, batch=2)[0])
+    assert torch.isfinite(action).all()
+    assert torch.equal(action[1], policy.error_regression.prior_action[1])
+    assert policy.guard.totals[FALLBACK] == 1
+
+
+BASELINES = {
+    "B1 (bc_rnn)": lambda **kw: PredVLABCRNNPolicy(PredVLABCRNNConfig(device="cpu", **kw)),
+    "B3 (bc_transformer)": lambda **kw: PredVLABCTransformerPolicy(PredVLABCTransformerConfig(
+        device="cpu", chunk_size=4, embed_dim=32, num_layers=1, feedforward_dim=64, context_length=6,
+        head_hidden_dim=32, **kw)),
+    "L3": lambda **kw: PredVLALadderPolicy(PredVLALadderConfig(device="cpu", rung="L3", **kw)),
+    "L5": lambda **kw: PredVLALadderPolicy(PredVLALadderConfig(device="cpu", rung="L5", **kw)),
+}
+
+
+@pytest.mark.parametrize("name", list(BASELINES))
+def test_baselines_hold_their_last_available_input(name):
+    torch.manual_seed(0)
+    policy = BASELINES[name]().eval()
+    clean = stream(10, batch=3, seed=2)
+    one_env = spoil(spoil(clean, 4, VISION, 1), 5, STATE, 1, float("inf"))
+    assert torch.equal(run(policy, one_env)[:, [0, 2]], run(policy, clean)[:, [0, 2]])  # bit for bit
+    bad = spoil(one_env, 7, STATE, None)
+    actions = run(policy, bad)
+    assert torch.isfinite(actions).all()
+    # The held input equals feeding the last available value explicitly.
+    held = [dict(o) for o in clean]
+    held[4][VISION] = held[4][VISION].clone()
+    held[4][VISION][1] = held[0][VISION][1]  # the refresh at step 4 keeps step 0's frame
+    held[5][STATE] = held[5][STATE].clone()
+    held[5][STATE][1] = held[4][STATE][1]
+    held[7][STATE] = held[6][STATE]
+    torch.testing.assert_close(actions, run(policy, held), rtol=0, atol=0)
+    with pytest.raises(BadObservationError):
+        run(BASELINES[name](on_bad_observation="raise").eval(), bad)
