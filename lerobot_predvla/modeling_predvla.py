@@ -16,6 +16,7 @@ from .observation_guard import ObservationGuard
 from .posterior_store import PosteriorStore
 from .predictive_model import PredictiveModel
 from .sequence_table import EpisodeSequences
+from .training_guard import TrainingGuard
 
 
 def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
@@ -58,6 +59,7 @@ class PredVLAPolicy(PreTrainedPolicy):
             )
         self._write_posteriors = True
         self.corruption = ObservationCorruption.from_config(config)  # Section 4.4; None unless configured
+        self.training_guard = TrainingGuard(self, config.on_nonfinite_training, self.name)
         self.reset()
 
     # ----- parameters, saving, loading -------------------------------------------------------------
@@ -179,7 +181,8 @@ class PredVLAPolicy(PreTrainedPolicy):
             cfg.lambda_v * terms["vision_error"] + cfg.lambda_q * terms["proprio_error"]
             + cfg.lambda_a * terms["action_nll"] + terms["complexity"]
         )
-        return loss, {k: v.item() for k, v in terms.items()}
+        values = {k: v.item() for k, v in terms.items()}
+        return self.training_guard.check_loss(loss, values), values
 
     # ----- acting --------------------------------------------------------------------------------------
     def reset(self) -> None:

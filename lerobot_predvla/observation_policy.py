@@ -29,6 +29,7 @@ from .configuration_predvla import (
 )
 from .observation_guard import ObservationGuard
 from .sequence_table import EpisodeSequences
+from .training_guard import TrainingGuard
 
 BASELINE_TRAIN_STEPS = 50_000  # Section 4.4: baselines train for 50,000 steps (PredVLA: 30,000)
 
@@ -162,6 +163,7 @@ class ObservationPolicy(PreTrainedPolicy):
         if dataset_meta is not None:
             use_dataset_frontend(config, Path(dataset_meta.root))
             self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
+        self.training_guard = TrainingGuard(self, config.on_nonfinite_training, self.name)
 
     def log_parameter_count(self) -> None:
         """Start-up line: our trainable parameters beside the paper's (Tables 4 and 5)."""
@@ -193,7 +195,8 @@ class ObservationPolicy(PreTrainedPolicy):
                 "is not supported."
             )
         loss, terms = self.sequence_loss(self.training_sequences(batch))
-        return loss, {k: v.item() for k, v in terms.items()}
+        values = {k: v.item() for k, v in terms.items()}
+        return self.training_guard.check_loss(loss, values), values
 
     def sequence_loss(self, seq: dict[str, Tensor]) -> tuple[Tensor, dict[str, Tensor]]:
         raise NotImplementedError

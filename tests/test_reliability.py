@@ -1,16 +1,26 @@
-"""Faults and bad input at acting time (docs/reliability.md): no non-finite value ever reaches an action."""
+"""Faults and bad input at acting and training time (docs/reliability.md): no non-finite value ever reaches an
+action, a weight, a posterior or a checkpoint."""
 
 import logging
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 import torch
+from lerobot.datasets import LeRobotDatasetMetadata
+from lerobot.policies.factory import make_policy
+from safetensors.torch import load_file
 from test_policy import randomised_policy, run, stream
 
+from lerobot_predvla import PredVLAConfig, PredVLAPolicy
 from lerobot_predvla.configuration_predvla_ladder import PredVLALadderConfig
 from lerobot_predvla.modeling_predvla_bc_rnn import PredVLABCRNNConfig, PredVLABCRNNPolicy
 from lerobot_predvla.modeling_predvla_bc_transformer import PredVLABCTransformerConfig, PredVLABCTransformerPolicy
 from lerobot_predvla.modeling_predvla_ladder import PredVLALadderPolicy
 from lerobot_predvla.observation_guard import FALLBACK, BadObservationError
+from lerobot_predvla.training_guard import NonFiniteTrainingError
 
 VISION, STATE, LANGUAGE = "observation.vision_features", "observation.state", "observation.language_features"
 
@@ -158,3 +168,111 @@ def test_baselines_hold_their_last_available_input(name):
     torch.testing.assert_close(actions, run(policy, held), rtol=0, atol=0)
     with pytest.raises(BadObservationError):
         run(BASELINES[name](on_bad_observation="raise").eval(), bad)
+
+
+# ----- training -------------------------------------------------------------------------------------------------
+def built_for_training(synthetic_dataset, **overrides) -> PredVLAPolicy:
+    meta = LeRobotDatasetMetadata("local/predvla_synthetic", root=synthetic_dataset)
+    config = PredVLAConfig(device="cpu", sequence_length=32, **overrides)
+    return make_policy(config, ds_meta=meta).train()
+
+
+def train_step(policy, episodes: list[int]) -> None:
+    optimizer = torch.optim.Adam(policy.get_optim_params(), lr=1e-3)
+    loss, _ = policy.forward({"episode_index": torch.tensor(episodes)})
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(policy.parameters(), 1.0)
+    optimizer.step()
+    optimizer.zero_grad()
+
+
+def snapshot(policy) -> dict[str, torch.Tensor]:
+    return {n: p.detach().clone() for n, p in policy.named_parameters()}
+
+
+def unchanged(before: dict[str, torch.Tensor], after: dict[str, torch.Tensor]) -> bool:
+    """Every tensor bit for bit the same (NaN equal to NaN)."""
+    return all(torch.allclose(before[n], after[n], rtol=0, atol=0, equal_nan=True) for n in before)
+
+
+def test_a_nonfinite_loss_stops_training_with_one_line(synthetic_dataset):
+    policy = built_for_training(synthetic_dataset)
+    train_step(policy, [0, 2])
+    with torch.no_grad():
+        policy.posterior_store.latents[3, 5, 7] = float("nan")
+    before = snapshot(policy)
+    with pytest.raises(NonFiniteTrainingError) as stop:
+        train_step(policy, [1, 3])
+    message = str(stop.value)
+    assert "\n" not in message and "non-finite loss at training step 2" in message
+    assert "vision_error=nan" in message and "action_nll=" in message and "complexity=" in message
+    assert unchanged(before, snapshot(policy))
+
+
+def test_a_nonfinite_gradient_stops_training_before_the_optimizer(synthetic_dataset):
+    policy = built_for_training(synthetic_dataset)
+    policy.model.bias[0].register_hook(lambda g: g * float("inf"))
+    before = snapshot(policy)
+    with pytest.raises(NonFiniteTrainingError, match=r"non-finite gradient of model\.bias\.0 at training step 1"):
+        train_step(policy, [0, 1])
+    assert unchanged(before, snapshot(policy))
+
+
+@pytest.mark.parametrize("fault", ["loss", "gradient"])
+def test_skip_leaves_every_weight_and_posterior_untouched(synthetic_dataset, fault, caplog):
+    policy = built_for_training(synthetic_dataset, on_nonfinite_training="skip")
+    if fault == "loss":
+        with torch.no_grad():
+            policy.posterior_store.latents[1, 0, 0] = float("inf")
+    else:
+        handle = policy.model.bias[0].register_hook(lambda g: g * float("nan"))
+    before = snapshot(policy)
+    with caplog.at_level(logging.WARNING):
+        train_step(policy, [1, 2])
+    after = snapshot(policy)
+    assert unchanged(before, after)
+    assert all(p.grad is None for p in policy.parameters())
+    assert policy.training_guard.skipped == 1
+    assert any(f"non-finite {fault}" in r.getMessage() and "batch skipped (1 so far)" in r.getMessage()
+               for r in caplog.records)
+    if fault == "gradient":
+        handle.remove()
+    train_step(policy, [0, 2])  # a good batch trains again
+    assert not torch.equal(snapshot(policy)["model.bias.0"], after["model.bias.0"])
+
+
+def run_lerobot_train(dataset, out, *extra: str) -> subprocess.CompletedProcess:
+    cmd = [str(Path(sys.executable).with_name("lerobot-train")), "--policy.type=predvla",
+           "--dataset.repo_id=local/predvla_synthetic", f"--dataset.root={dataset}", "--policy.push_to_hub=false",
+           "--policy.device=cpu", "--num_workers=0", "--steps=6", "--save_freq=1", "--log_freq=1", "--batch_size=2",
+           "--wandb.enable=false", "--policy.sequence_length=32", f"--output_dir={out}", "--seed=3",
+           "--policy.optimizer_lr=1e30", "--policy.posterior_lr=1e30", *extra]
+    return subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
+
+
+def checkpoints_are_finite(out: Path) -> list[Path]:
+    files = sorted(out.glob("checkpoints/0*/pretrained_model/*.safetensors"))  # not the `last` link
+    for file in files:
+        for key, tensor in load_file(str(file)).items():
+            assert torch.isfinite(tensor).all(), (file, key)
+    return files
+
+
+def test_lerobot_train_stops_on_divergence_before_a_nonfinite_checkpoint(synthetic_dataset, tmp_path):
+    """A learning rate of 1e30 makes the loss non-finite within a few steps of the real lerobot-train."""
+    result = run_lerobot_train(synthetic_dataset, tmp_path / "run")
+    assert result.returncode == 1, result.stderr[-3000:]
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.startswith("predvla: non-finite") and "at training step" in last and "action_nll=" in last, last
+    step = int(last.split("at training step ")[1].split()[0])
+    assert 1 < step <= 6
+    files = checkpoints_are_finite(tmp_path / "run")
+    assert len({f.parent.parent.name for f in files}) == step - 1  # every completed step was saved, finite
+
+
+def test_lerobot_train_skips_nonfinite_batches_when_asked(synthetic_dataset, tmp_path):
+    result = run_lerobot_train(synthetic_dataset, tmp_path / "run", "--policy.on_nonfinite_training=skip")
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "batch skipped" in result.stderr
+    files = checkpoints_are_finite(tmp_path / "run")
+    assert {f.parent.parent.name for f in files} == {f"{s:06d}" for s in range(1, 7)}
