@@ -6,7 +6,6 @@ from pathlib import Path
 import torch
 from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.utils.constants import OBS_STATE
-from safetensors.torch import load_file
 from torch import Tensor
 
 from .configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, PredVLAConfig, use_dataset_frontend
@@ -15,6 +14,7 @@ from .error_regression import ErrorRegression
 from .observation_guard import ObservationGuard
 from .posterior_store import PosteriorStore
 from .predictive_model import PredictiveModel
+from .safe_loading import check_tensors, read_safetensors
 from .sequence_table import EpisodeSequences
 from .training_guard import TrainingGuard
 
@@ -131,9 +131,15 @@ class PredVLAPolicy(PreTrainedPolicy):
 
     @classmethod
     def _load_as_safetensor(cls, model: "PredVLAPolicy", model_file: str, map_location: str, strict: bool):
-        model.load_state_dict(load_file(model_file, device="cpu"))
+        """Weights (and, resuming training, posteriors) read and checked whole before either is loaded."""
+        state, _ = read_safetensors(model_file)
+        check_tensors(model_file, state, {k: v.detach().cpu() for k, v in model.state_dict().items()})
+        posteriors = None
         if model.posterior_store is not None:  # resuming training: restore the posteriors too
-            model.posterior_store.load(Path(model_file).parent)
+            posteriors = model.posterior_store.read(Path(model_file).parent)
+        model.load_state_dict(state)
+        if posteriors is not None:
+            model.posterior_store.assign(posteriors)
         return model
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):

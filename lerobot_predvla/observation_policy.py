@@ -28,6 +28,7 @@ from .configuration_predvla import (
     validate_cached_features,
 )
 from .observation_guard import ObservationGuard
+from .safe_loading import check_tensors, read_safetensors
 from .sequence_table import EpisodeSequences
 from .training_guard import TrainingGuard
 
@@ -175,6 +176,14 @@ class ObservationPolicy(PreTrainedPolicy):
 
     def get_optim_params(self) -> list[dict]:
         return [{"params": [p for p in self.parameters() if p.requires_grad]}]
+
+    @classmethod
+    def _load_as_safetensor(cls, model: "ObservationPolicy", model_file: str, map_location: str, strict: bool):
+        """Weights read and checked whole (`safe_loading`) before any is loaded."""
+        state, _ = read_safetensors(model_file)
+        check_tensors(model_file, state, {k: v.detach().cpu() for k, v in model.state_dict().items()})
+        model.load_state_dict(state)
+        return model
 
     def training_sequences(self, batch: dict[str, Tensor]) -> dict[str, Tensor]:
         """Whole episodes of the batch's `episode_index`, time-major, vision held between refreshes."""

@@ -1,25 +1,35 @@
 """Faults and bad input at acting and training time (docs/reliability.md): no non-finite value ever reaches an
 action, a weight, a posterior or a checkpoint."""
 
+import ast
+import json
 import logging
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from lerobot.datasets import LeRobotDatasetMetadata
 from lerobot.policies.factory import make_policy
-from safetensors.torch import load_file
+from safetensors.numpy import load_file as load_numpy
+from safetensors.numpy import save_file as save_numpy
+from safetensors.torch import load_file, save_file
+from test_frontend import frontend_dir, libero_root  # noqa: F401  (module fixtures)
 from test_policy import randomised_policy, run, stream
 
 from lerobot_predvla import PredVLAConfig, PredVLAPolicy
 from lerobot_predvla.configuration_predvla_ladder import PredVLALadderConfig
+from lerobot_predvla.frontend.artefact import METADATA_FILE, TENSORS_FILE, FrontendArtefact, FrontendArtefactError
 from lerobot_predvla.modeling_predvla_bc_rnn import PredVLABCRNNConfig, PredVLABCRNNPolicy
 from lerobot_predvla.modeling_predvla_bc_transformer import PredVLABCTransformerConfig, PredVLABCTransformerPolicy
 from lerobot_predvla.modeling_predvla_ladder import PredVLALadderPolicy
 from lerobot_predvla.observation_guard import FALLBACK, BadObservationError
+from lerobot_predvla.posterior_store import POSTERIOR_STORE_FILE
+from lerobot_predvla.safe_loading import CheckpointError, read_safetensors
 from lerobot_predvla.training_guard import NonFiniteTrainingError
 
 VISION, STATE, LANGUAGE = "observation.vision_features", "observation.state", "observation.language_features"
@@ -276,3 +286,165 @@ def test_lerobot_train_skips_nonfinite_batches_when_asked(synthetic_dataset, tmp
     assert "batch skipped" in result.stderr
     files = checkpoints_are_finite(tmp_path / "run")
     assert {f.parent.parent.name for f in files} == {f"{s:06d}" for s in range(1, 7)}
+
+
+# ----- loading ----------------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def saved(synthetic_dataset, tmp_path_factory) -> tuple[Path, PredVLAPolicy]:
+    """A training checkpoint: model.safetensors and posterior_store.safetensors."""
+    policy = built_for_training(synthetic_dataset)
+    train_step(policy, [0, 1])
+    out = tmp_path_factory.mktemp("ckpt")
+    policy.save_pretrained(out)
+    return out, policy
+
+
+def tampered(saved_dir: Path, tmp_path: Path, file: str, mutate) -> Path:
+    out = tmp_path / "ckpt"
+    shutil.copytree(saved_dir, out)
+    if mutate in FILE_DAMAGE:
+        mutate(out / file)
+    else:  # edits the tensors
+        tensors, metadata = read_safetensors(out / file)
+        mutate(tensors)
+        save_file(tensors, str(out / file), metadata=metadata)
+    return out
+
+
+def _nan_weight(t: dict) -> None:
+    t["model.prior.1.weight"][3, 4] = float("nan")
+
+
+def _half_precision(t: dict) -> None:
+    t["model.v_head.0.bias"] = t["model.v_head.0.bias"].half()
+
+
+def _drop_key(t: dict) -> None:
+    del t["model.lang.weight"]
+
+
+def _reshape(t: dict) -> None:
+    t["model.prior.0.weight"] = t["model.prior.0.weight"][:32].clone()
+
+
+def _truncate(path: Path) -> None:
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+def _garbage(path: Path) -> None:
+    path.write_bytes(b"\x00not safetensors" * 64)
+
+
+FILE_DAMAGE = (_truncate, _garbage)
+BAD_WEIGHTS = {
+    "truncated": (_truncate, ["truncated or corrupt"]),
+    "garbage": (_garbage, ["truncated or corrupt"]),
+    "nan weight": (_nan_weight, ["key 'model.prior.1.weight'", "non-finite value nan at index [3, 4]"]),
+    "other dtype": (_half_precision, ["'model.v_head.0.bias' is (256,) torch.float16", "needs (256,) torch.float32"]),
+    "missing key": (_drop_key, ["another model or config", "missing keys ['model.lang.weight']"]),
+    "other config": (_reshape, ["'model.prior.0.weight' is (32, 64)", "needs (64, 64)"]),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_WEIGHTS))
+def test_a_bad_weights_file_fails_with_one_line_and_loads_nothing(saved, tmp_path, case):
+    mutate, fragments = BAD_WEIGHTS[case]
+    ckpt = tampered(saved[0], tmp_path, "model.safetensors", mutate)
+    with pytest.raises(CheckpointError if case != "nan weight" else ValueError) as err:
+        PredVLAPolicy.from_pretrained(ckpt)
+    message = str(err.value)
+    assert "\n" not in message and str(ckpt / "model.safetensors") in message
+    for fragment in fragments:
+        assert fragment in message, message
+    target = randomised_policy()
+    before = snapshot(target)
+    with pytest.raises(ValueError):
+        PredVLAPolicy._load_as_safetensor(target, str(ckpt / "model.safetensors"), "cpu", True)
+    assert unchanged(before, snapshot(target))
+
+
+BAD_POSTERIORS = {
+    "truncated": (_truncate, ["truncated or corrupt"]),
+    "nan posterior": (lambda t: t["latents"].__setitem__((2, 3, 4), float("inf")),
+                      ["key 'latents'", "non-finite value inf at index [2, 3, 4]"]),
+    "other dataset": (lambda t: t.__setitem__("latents", t["latents"][:5].clone()),
+                      ["'latents' is (5, 32, 256)", "needs (8, 32, 256)", "another config or dataset"]),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_POSTERIORS))
+def test_a_bad_posterior_store_fails_before_the_weights_load(saved, synthetic_dataset, tmp_path, case):
+    mutate, fragments = BAD_POSTERIORS[case]
+    ckpt = tampered(saved[0], tmp_path, POSTERIOR_STORE_FILE, mutate)
+    target = built_for_training(synthetic_dataset)  # as lerobot-train --resume builds it
+    before = snapshot(target)
+    with pytest.raises(ValueError) as err:
+        PredVLAPolicy._load_as_safetensor(target, str(ckpt / "model.safetensors"), "cpu", True)
+    message = str(err.value)
+    assert "\n" not in message and str(ckpt / POSTERIOR_STORE_FILE) in message
+    for fragment in fragments:
+        assert fragment in message, message
+    assert unchanged(before, snapshot(target))  # neither the network nor the posteriors
+    PredVLAPolicy._load_as_safetensor(target, str(saved[0] / "model.safetensors"), "cpu", True)
+    assert unchanged(snapshot(saved[1]), snapshot(target))
+
+
+def test_a_baseline_checkpoint_is_checked_the_same_way(tmp_path):
+    torch.manual_seed(0)
+    policy = BASELINES["B1 (bc_rnn)"]()
+    policy.save_pretrained(tmp_path / "b1")
+    _truncate(tmp_path / "b1" / "model.safetensors")
+    with pytest.raises(CheckpointError, match="truncated or corrupt"):
+        PredVLABCRNNPolicy.from_pretrained(tmp_path / "b1")
+
+
+BAD_ARTEFACTS = {
+    "truncated arrays": (TENSORS_FILE, _truncate, ["unreadable front-end artefact"]),
+    "nan component": (TENSORS_FILE, lambda p: _edit_arrays(p, "vision/observation.images.image/components", np.nan),
+                      ["key 'vision/observation.images.image/components'", "non-finite value nan at index [0, 1]"]),
+    "other shape": (TENSORS_FILE, lambda p: _edit_arrays(p, "language/mean", None),
+                    ["tensor 'language/mean' has shape (383,)", "says (384,)"]),
+    "malformed json": (METADATA_FILE, lambda p: p.write_text(json.dumps(
+        {k: v for k, v in json.loads(p.read_text()).items() if k != "vision"})), ["malformed frontend.json", "vision"]),
+}
+
+
+def _edit_arrays(path: Path, key: str, value: float | None) -> None:
+    arrays = load_numpy(str(path))
+    if value is None:
+        arrays[key] = arrays[key][:-1].copy()
+    else:
+        arrays[key][0, 1] = value
+    save_numpy(arrays, str(path))
+
+
+@pytest.mark.parametrize("case", list(BAD_ARTEFACTS))
+def test_a_bad_front_end_artefact_fails_with_one_line(frontend_dir, tmp_path, case):  # noqa: F811
+    file, mutate, fragments = BAD_ARTEFACTS[case]
+    artefact_dir = tmp_path / "fe"
+    shutil.copytree(frontend_dir, artefact_dir)
+    mutate(artefact_dir / file)
+    with pytest.raises(FrontendArtefactError) as err:
+        FrontendArtefact.load(artefact_dir)
+    message = str(err.value)
+    assert "\n" not in message and str(artefact_dir) in message
+    for fragment in fragments:
+        assert fragment in message, message
+
+
+def test_loading_never_unpickles():
+    """Every torch.load in the package passes weights_only=True; nothing imports pickle or allows it in numpy."""
+    package = Path(__file__).resolve().parents[1] / "lerobot_predvla"
+    for path in package.rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import | ast.ImportFrom):
+                names = [a.name for a in node.names] + ([node.module] if isinstance(node, ast.ImportFrom) else [])
+                assert not any(n and n.split(".")[0] in ("pickle", "dill", "joblib") for n in names), path
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "load":
+                owner = ast.unparse(node.func.value)
+                keywords = {k.arg: ast.unparse(k.value) for k in node.keywords}
+                if owner == "torch":
+                    assert keywords.get("weights_only") == "True", f"{path}:{node.lineno}"
+                if owner in ("np", "numpy"):
+                    assert keywords.get("allow_pickle", "False") == "False", f"{path}:{node.lineno}"
