@@ -5,10 +5,9 @@ from pathlib import Path
 
 import torch
 from lerobot.policies.pretrained import PreTrainedPolicy
-from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
 
-from .configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, PredVLAConfig, use_dataset_frontend
+from .configuration_predvla import PredVLAConfig, use_dataset_frontend
 from .corruption import ObservationCorruption
 from .error_regression import ErrorRegression
 from .observation_guard import ObservationGuard
@@ -197,11 +196,7 @@ class PredVLAPolicy(PreTrainedPolicy):
         self.error_regression = ErrorRegression(self.model)
         self.control_step = 0
         if not hasattr(self, "guard"):
-            cfg = self.config
-            self.guard = ObservationGuard(
-                (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE),
-                (cfg.language_dim, cfg.vision_dim, cfg.proprio_dim), cfg.on_bad_observation, self.name,
-            )
+            self.guard = ObservationGuard.for_policy(self.config, self.name)
         self.guard.reset()
 
     @torch.no_grad()

@@ -17,7 +17,10 @@ import logging
 
 import numpy as np
 import torch
+from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
+
+from .configuration_predvla import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
 FALLBACK = "fallback_actions"  # count of non-finite actions replaced by `safe_action`
 
@@ -40,6 +43,14 @@ class ObservationGuard:
         self.keys, self.dims, self.mode, self.name = keys, dims, mode, name
         self.totals = {key: 0 for key in (*keys, FALLBACK)}  # since construction, all episodes
         self.reset()
+
+    @classmethod
+    def for_policy(cls, config, name: str) -> "ObservationGuard":
+        """The guard of a policy that reads language, vision features and proprioception (in that order)."""
+        return cls(
+            (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE),
+            (config.language_dim, config.vision_dim, config.proprio_dim), config.on_bad_observation, name,
+        )
 
     def reset(self) -> None:
         """Log the finished episode's counts (if any channel was unavailable) and start a new episode."""

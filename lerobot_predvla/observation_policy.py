@@ -16,12 +16,9 @@ from lerobot.configs import PreTrainedConfig
 from lerobot.configs.types import NormalizationMode
 from lerobot.optim.optimizers import AdamConfig
 from lerobot.policies.pretrained import PreTrainedPolicy
-from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
 
 from .configuration_predvla import (
-    OBS_LANGUAGE_FEATURES,
-    OBS_VISION_FEATURES,
     cached_feature_normalization,
     check_fault_modes,
     use_dataset_frontend,
@@ -216,11 +213,7 @@ class ObservationPolicy(PreTrainedPolicy):
         # The latest available inputs per environment: the refreshed frame, proprioception and language.
         self.held: list[Tensor] | None = None
         if not hasattr(self, "guard"):
-            cfg = self.config
-            self.guard = ObservationGuard(
-                (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE),
-                (cfg.language_dim, cfg.vision_dim, cfg.proprio_dim), cfg.on_bad_observation, self.name,
-            )
+            self.guard = ObservationGuard.for_policy(self.config, self.name)
         self.guard.reset()
 
     def observe(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor, Tensor]:
