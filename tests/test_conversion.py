@@ -198,6 +198,14 @@ def _replace(key, value_fn):
     return mutate
 
 
+def _poison(index: tuple[int, int], value: float):
+    def poisoned(a: np.ndarray) -> np.ndarray:
+        a = a.astype(np.float64)
+        a[index] = value
+        return a
+    return poisoned
+
+
 def _not_libero(path: Path):
     path.unlink()
     with h5py.File(path, "w") as f:
@@ -221,6 +229,12 @@ BAD_HDF5 = {
                           ["demo_0", "obs/joint_states", "expected (N, 7)"]),
     "no problem_info": (lambda f: f["data"].attrs.__delitem__("problem_info"), ["problem_info", "not a LIBERO"]),
     "no demos": (lambda f: [f["data"].__delitem__(k) for k in list(f["data"])], ["no demonstrations"]),
+    "nan action": (_replace("data/demo_1/actions", _poison((2, 4), np.nan)),
+                   ["demo_1", "key 'actions'", "non-finite value nan at index [2, 4]"]),
+    "inf joint state": (_replace("data/demo_0/obs/joint_states", _poison((0, 6), np.inf)),
+                        ["demo_0", "key 'obs/joint_states'", "non-finite value inf at index [0, 6]"]),
+    "nan gripper state": (_replace("data/demo_1/obs/gripper_states", _poison((3, 1), -np.inf)),
+                          ["demo_1", "key 'obs/gripper_states'", "non-finite value -inf at index [3, 1]"]),
 }
 BAD_FILES = {"not LIBERO": (_not_libero, ["not a LIBERO", "'data'"]), "garbage": (
     lambda p: p.write_bytes(b"\x00garbage" * 100), ["corrupt"]), "truncated": (_truncate, ["corrupt"])}
@@ -278,6 +292,24 @@ def test_failure_mid_conversion_leaves_nothing(libero, frontend_dir, tmp_path, c
     out = tmp_path / "out" / "ds"
     code = convert(libero[0], frontend_dir, out)
     _assert_rejected(code, capsys, out, ["b_soup_again_demo.hdf5", "demo_0", "simulated bad chunk"])
+
+
+def test_nonfinite_features_stop_the_conversion(libero, frontend_dir, tmp_path, capsys, monkeypatch):
+    real_encode = FrozenFrontend.encode_images
+    calls = []
+
+    def encode_with_nan(self, images):
+        features = real_encode(self, images)
+        calls.append(len(features))
+        if len(calls) == 2:
+            features[1, 7] = float("nan")
+        return features
+
+    monkeypatch.setattr(FrozenFrontend, "encode_images", encode_with_nan)
+    out = tmp_path / "out" / "ds"
+    code = convert(libero[0], frontend_dir, out)
+    fragments = ["a_soup_demo.hdf5", "demo_1", f"key '{OBS_VISION_FEATURES}'", "non-finite value nan at index [1, 7]"]
+    _assert_rejected(code, capsys, out, fragments)
 
 
 def test_existing_output_is_not_touched(libero, frontend_dir, tmp_path, capsys):

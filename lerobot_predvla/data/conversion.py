@@ -1,7 +1,8 @@
 """LIBERO hdf5 -> LeRobot v3.0 dataset with PredVLA's cached front-end features (`predvla convert`).
 
 The dataset is written into a temporary directory beside `out` and renamed into place only once it is
-complete, so a failed conversion leaves nothing behind.
+complete, so a failed conversion leaves nothing behind. States and actions are checked finite before any
+work starts, the encoded features before they are written (`finite.check_finite`).
 """
 
 import shutil
@@ -23,6 +24,7 @@ from lerobot_predvla.policies.common.cached_features import (
     OBS_LANGUAGE_FEATURES,
     OBS_VISION_FEATURES,
 )
+from lerobot_predvla.utils.finite import check_finite
 
 LIBERO_FPS = 20
 IMAGE_STORAGES = ("video", "png")
@@ -64,6 +66,8 @@ def dataset_features(image_shapes: tuple, vision_dim: int, language_dim: int, im
 def _write_episodes(dataset: LeRobotDataset, refs: list[DemoRef], frontend: FrozenFrontend) -> None:
     instructions = sorted({ref.instruction for ref in refs})
     language = dict(zip(instructions, frontend.encode_instructions(instructions).numpy(), strict=True))
+    for text, features in language.items():
+        check_finite(features, f"instruction {text!r}", OBS_LANGUAGE_FEATURES)
     with tqdm(total=sum(ref.num_frames for ref in refs), desc="converting", unit="frame") as progress:
         for ref in refs:
             demo = read_demo(ref)
@@ -77,6 +81,7 @@ def _write_episodes(dataset: LeRobotDataset, refs: list[DemoRef], frontend: Froz
             distinct = np.flatnonzero(~repeated)
             vision = frontend.encode_images({c: pixels[distinct] for c, pixels in images.items()}).numpy()
             vision = vision[np.cumsum(~repeated) - 1]
+            check_finite(vision, f"{ref.file}, demo '{ref.demo}'", OBS_VISION_FEATURES)
             for t in range(ref.num_frames):
                 frame = {camera: pixels[t] for camera, pixels in images.items()}
                 frame[OBS_STATE] = demo.state[t]

@@ -1,7 +1,8 @@
 """Reader and validator of the original LIBERO hdf5 demonstrations (`<suite>/<task>_demo.hdf5`).
 
 Every problem is reported as a `LiberoDataError` naming the file, the demonstration and the key.
-`scan_suites` validates the structure of all files (shapes only, no pixel data) before any work starts.
+`scan_suites` validates the structure of all files (shapes, and finite states and actions; no pixel data)
+before any work starts.
 """
 
 import json
@@ -11,6 +12,8 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
+from lerobot_predvla.utils.finite import NonFiniteError, check_finite
 
 # LeRobot camera keys (as LeRobot's LIBERO env names them) -> hdf5 observation keys.
 CAMERAS = {"observation.images.image": "agentview_rgb", "observation.images.image2": "eye_in_hand_rgb"}
@@ -104,6 +107,8 @@ def _check_demo(path: Path, name: str, group: h5py.Group, instruction: str) -> D
                 path, f"observation/action length mismatch: {length} steps, '{ACTION_KEY}' has {num_frames}",
                 name, key,
             )
+    for key in expected:  # small arrays: read them now so a NaN stops the conversion before any work
+        check_finite(group[key][()], f"{path}, demo '{name}'", key)
     return DemoRef(path, name, num_frames, instruction, tuple(image_shapes))
 
 
@@ -120,7 +125,7 @@ def scan_file(path: Path | str) -> list[DemoRef]:
             if not names:
                 raise LiberoDataError(path, "no demonstrations (no data/demo_<i> groups)", key="data")
             return [_check_demo(path, name, data[name], instruction) for name in names]
-    except LiberoDataError:
+    except (LiberoDataError, NonFiniteError):
         raise
     except (OSError, RuntimeError, KeyError, ValueError) as err:  # h5py reports corruption as these.
         raise LiberoDataError(path, f"corrupt or unreadable HDF5 file ({err})") from err

@@ -21,6 +21,12 @@ through `predvla convert --hdf5-root`) gets `PredVLALiberoProcessorStep` instead
 --dataset-root`) gets LeRobot's own processor unchanged. Every other policy and env type gets LeRobot's
 processors unchanged. The other two changes above are not available there (every step is
 rendered, at 360 px unless `--env.observation_height/width=128`), so `predvla_libero` stays the default.
+
+With `predvla_libero`, a fault in one sub-environment ends only that episode, as a failure (`predvla_libero`), and
+`--env.fault_rate` injects sensor faults (`fault_injection`). Importing this module also wraps LeRobot's
+`eval_policy_all` so that `eval_info.json` gets a `predvla_faults` section: faulted episodes with their
+reasons, non-finite actions received by the environments, observations the policy masked, actions it
+replaced, and the injected faults.
 """
 
 import sys
@@ -31,8 +37,10 @@ import torch
 from lerobot.configs.types import FeatureType, PipelineFeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig, LiberoEnv, _make_vec_env_cls
 from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline, ProcessorStepRegistry
+from lerobot.scripts import lerobot_eval
 from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 
+from lerobot_predvla.envs.fault_injection import FaultInjectionStep
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
 
@@ -80,11 +88,18 @@ class PredVLALiberoEnv(LiberoEnv):
             visual_refresh_interval, Table 1: 4); 1 renders every step.
         observation_height: Camera height in pixels (128, the size of LIBERO's demonstrations).
         observation_width: Camera width in pixels (128).
+        fault_rate: Fraction in [0, 1] of camera frames and of proprio readings spoiled before the policy
+            sees them (fault-injection evaluation, docs/reliability.md); 0 (default) injects nothing.
+        fault_mode: "nan" (the frame's values become NaN) or "drop" (the frame is missing).
+        fault_seed: Seed of the fault draws.
     """
 
     render_interval: int = 4
     observation_height: int = 128
     observation_width: int = 128
+    fault_rate: float = 0.0
+    fault_mode: str = "nan"
+    fault_seed: int = 0
 
     def __post_init__(self):
         super().__post_init__()
@@ -92,6 +107,12 @@ class PredVLALiberoEnv(LiberoEnv):
             raise ValueError(f"--env.render_interval must be >= 1, got {self.render_interval}.")
         if self.obs_type != "pixels_agent_pos":
             raise ValueError(f"--env.obs_type must be 'pixels_agent_pos' for predvla_libero, got {self.obs_type!r}.")
+        self.fault_injection()  # validates fault_rate and fault_mode
+
+    def fault_injection(self) -> FaultInjectionStep | None:
+        if self.fault_rate == 0.0:
+            return None
+        return FaultInjectionStep(rate=self.fault_rate, mode=self.fault_mode, seed=self.fault_seed)
 
     @property
     def gym_kwargs(self) -> dict:
@@ -105,12 +126,16 @@ class PredVLALiberoEnv(LiberoEnv):
         return create_envs(self, n_envs, _make_vec_env_cls(use_async_envs, n_envs))
 
     def get_env_processors(self):
-        return libero_env_processors()
+        return libero_env_processors(self.fault_injection())
 
 
-def libero_env_processors() -> tuple[PolicyProcessorPipeline, PolicyProcessorPipeline]:
-    """Env pre/post-processors that turn LIBERO observations into what PredVLA consumes."""
-    return PolicyProcessorPipeline(steps=[PredVLALiberoProcessorStep()]), PolicyProcessorPipeline(steps=[])
+def libero_env_processors(
+    fault_injection: FaultInjectionStep | None = None,
+) -> tuple[PolicyProcessorPipeline, PolicyProcessorPipeline]:
+    """Env pre/post-processors that turn LIBERO observations into what PredVLA consumes (then spoil some of
+    them, with fault injection)."""
+    steps = [PredVLALiberoProcessorStep(), *([fault_injection] if fault_injection is not None else [])]
+    return PolicyProcessorPipeline(steps=steps), PolicyProcessorPipeline(steps=[])
 
 
 _lerobot_make_env_pre_post_processors = lerobot.envs.factory.make_env_pre_post_processors
@@ -135,6 +160,41 @@ def make_env_pre_post_processors(env_cfg: EnvConfig, policy_cfg) -> tuple:
             )
     return _lerobot_make_env_pre_post_processors(env_cfg, policy_cfg)
 
+
+def fault_summary(envs: dict, policy, env_preprocessor) -> dict:
+    """The `predvla_faults` section of eval_info.json (see the module docstring)."""
+    faulted, nonfinite_actions = [], 0
+    for suite, tasks in envs.items():
+        for vec_env in tasks.values():
+            try:
+                per_env, actions = vec_env.get_attr("faults"), vec_env.get_attr("nonfinite_actions")
+            except AttributeError:  # not a predvla_libero env
+                continue
+            faulted += [{"suite": suite, **record} for records in per_env for record in records]
+            nonfinite_actions += sum(actions)
+    summary = {"faulted_episodes": sorted(faulted, key=lambda r: (r["suite"], r["task_id"], r["episode_ix"])),
+               "nonfinite_actions": nonfinite_actions}
+    guard = getattr(policy, "guard", None)
+    if guard is not None:
+        guard.reset()  # logs the last episode's report
+        summary["policy"] = dict(guard.totals)
+    injection = next((s for s in getattr(env_preprocessor, "steps", []) if isinstance(s, FaultInjectionStep)), None)
+    if injection is not None:
+        summary["injected"] = {**injection.get_config(), **injection.counts}
+    return summary
+
+
+_lerobot_eval_policy_all = lerobot_eval.eval_policy_all
+
+
+def eval_policy_all(envs: dict, policy, env_preprocessor, *args, **kwargs) -> dict:
+    """LeRobot's `eval_policy_all`, plus the `predvla_faults` section (written into eval_info.json)."""
+    info = _lerobot_eval_policy_all(envs, policy, env_preprocessor, *args, **kwargs)
+    info["predvla_faults"] = fault_summary(envs, policy, env_preprocessor)
+    return info
+
+
+lerobot_eval.eval_policy_all = eval_policy_all
 
 # The modules that bind LeRobot's function by name: the factory, its package, and the CLI scripts (loaded
 # before plugins when run as `lerobot-eval` / `lerobot-train`; imported later, they take it from the package).

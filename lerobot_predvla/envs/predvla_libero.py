@@ -1,15 +1,24 @@
-"""The `predvla_libero` gym env: LeRobot's LiberoEnv with end-of-step observations and sparse rendering."""
+"""The `predvla_libero` gym env: LeRobot's LiberoEnv with end-of-step observations and sparse rendering.
 
+A fault in one sub-environment (an exception from MuJoCo or robosuite, a non-finite simulator state, an
+unstable-simulation warning or a non-finite action) ends that episode as a failure with its reason; the
+other sub-environments and the run go on. Faults are kept in `faults` and listed in `eval_info.json`.
+"""
+
+import logging
 from functools import partial
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 from gymnasium import spaces
 from lerobot.envs.libero import LiberoEnv, _get_suite, _select_task_ids, parse_camera_names
+from lerobot.envs.utils import NEW_ROLLOUT_OPTION
 from libero.libero.envs import OffScreenRenderEnv
 from robosuite import macros
 
 IMAGE_FRESH = "image_fresh"  # becomes `observation.image_fresh` in LeRobot's preprocess_observation
+UNSTABLE = mujoco.mjtWarning.mjWARN_BADQACC  # MuJoCo's "NaN, Inf or huge value in QACC": it resets the state
 
 
 class SparseRenderLiberoEnv(LiberoEnv):
@@ -28,6 +37,11 @@ class SparseRenderLiberoEnv(LiberoEnv):
         self._steps_since_reset = 0
         self._images: dict[str, np.ndarray] | None = None
         self.observation_space.spaces[IMAGE_FRESH] = spaces.Box(0, 1, shape=(1,), dtype=np.uint8)
+        self.faults: list[dict] = []  # one record per faulted episode
+        self.nonfinite_actions = 0  # actions received with a NaN or infinite component
+        self._rollouts = 0  # lerobot-eval rollouts started (each an episode of this sub-environment)
+        self._counted = False  # False in the extra episodes of Gymnasium's autoreset, which lerobot-eval discards
+        self._last_observation: dict | None = None
 
     def _ensure_env(self) -> None:
         if self._env is not None:
@@ -75,13 +89,61 @@ class SparseRenderLiberoEnv(LiberoEnv):
             return super().render()
         return next(iter(self._images.values()))[::-1, ::-1]  # upright, as LiberoEnv.render
 
-    def reset(self, seed=None, **kwargs):
+    def reset(self, seed=None, options=None, **kwargs):
+        self._counted = bool((options or {}).get(NEW_ROLLOUT_OPTION))
+        self._rollouts += self._counted
         self._steps_since_reset, self._images = 0, None
-        return super().reset(seed=seed, **kwargs)
+        try:
+            observation, info = super().reset(seed=seed, **kwargs)
+        except Exception as err:  # noqa: BLE001  (a simulator left broken by a fault: rebuild it once)
+            logging.warning("predvla_libero: reset failed (%s: %s); rebuilding the simulator.", type(err).__name__, err)
+            self._drop_simulator()
+            observation, info = super().reset(seed=seed, **kwargs)
+        self._last_observation = observation
+        return observation, info
 
     def step(self, action: np.ndarray):
         self._steps_since_reset += 1
-        return super().step(action)
+        if not np.isfinite(action).all():
+            self.nonfinite_actions += 1
+            return self._fault(f"non-finite action {np.asarray(action).tolist()}")
+        try:
+            self._ensure_env()
+            warnings_before = self._env.env.sim.data._data.warning[UNSTABLE].number
+            observation, reward, terminated, truncated, info = super().step(action)
+            data = self._env.env.sim.data
+            for name in ("qpos", "qvel"):
+                if not np.isfinite(getattr(data, name)).all():
+                    return self._fault(f"non-finite simulator state ({name})")
+            if data._data.warning[UNSTABLE].number > warnings_before:
+                return self._fault("MuJoCo reported an unstable simulation (NaN, Inf or huge value in QACC)")
+        except Exception as err:  # noqa: BLE001  (MuJoCo and robosuite raise many types; none may end the run)
+            return self._fault(f"{type(err).__name__}: {err}")
+        self._last_observation = observation
+        return observation, reward, terminated, truncated, info
+
+    def _drop_simulator(self) -> None:
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001  (a broken simulator may fail to close; it is dropped anyway)
+            self._env = None
+
+    def _fault(self, reason: str):
+        """End this episode as a failure: record the reason, drop the simulator (rebuilt at the next reset)
+        and return the last good observation with `terminated=True` and `is_success=False`."""
+        record = {
+            "episode_ix": max(self._rollouts - 1, 0) * self._reset_stride + self.episode_index,
+            "task": self.task,
+            "task_id": self.task_id,
+            "step": self._steps_since_reset,
+            "reason": reason,
+        }
+        if self._counted:
+            self.faults.append(record)
+            logging.warning("predvla_libero: episode faulted and ended as a failure: %s", record)
+        self._drop_simulator()
+        info = {"task": self.task, "task_id": self.task_id, "done": True, "is_success": False, "fault": reason}
+        return self._last_observation, 0.0, True, False, info
 
 
 def create_envs(cfg, n_envs: int, env_cls) -> dict[str, dict[int, gym.vector.VectorEnv]]:

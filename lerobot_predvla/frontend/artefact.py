@@ -12,6 +12,7 @@ from lerobot_predvla.frontend.language import LANGUAGE_ENCODER_DIM, LANGUAGE_ENC
 from lerobot_predvla.frontend.pca import PCABasis
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import VISION_ENCODER_DIM, VISION_ENCODER_NAME, VisionWeights
+from lerobot_predvla.utils.finite import NonFiniteError, check_finite
 
 TENSORS_FILE = "frontend.safetensors"
 METADATA_FILE = "frontend.json"
@@ -136,15 +137,38 @@ class FrontendArtefact:
     def from_metadata(
         cls, meta: dict, tensors: dict[str, np.ndarray], where: Path | str
     ) -> "FrontendArtefact":
-        """Rebuild an artefact from its JSON description and arrays (`where` names the source in errors)."""
-        if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
-            raise FrontendArtefactError(f"{where}: not a {FORMAT} v{FORMAT_VERSION} artefact.")
+        """Rebuild an artefact from its JSON description and arrays (`where` names the source in errors).
 
+        Every array must have the shape its JSON description gives, and the arrays that encode features
+        (`mean`, `components`) must be finite."""
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
+            raise FrontendArtefactError(f"{where}: not a {FORMAT} v{FORMAT_VERSION} artefact.")
+        try:
+            return cls._from_checked_metadata(meta, tensors, where)
+        except (KeyError, TypeError) as err:
+            raise FrontendArtefactError(f"{where}: malformed {METADATA_FILE}, no field {err}.") from err
+        except NonFiniteError as err:
+            raise FrontendArtefactError(str(err)) from err
+
+    @classmethod
+    def _from_checked_metadata(
+        cls, meta: dict, tensors: dict[str, np.ndarray], where: Path | str
+    ) -> "FrontendArtefact":
         def basis(name: str, info: dict) -> PCABasis:
-            try:
-                arrays = {array: np.asarray(tensors[f"{name}/{array}"]) for array in _ARRAYS}
-            except KeyError as err:
-                raise FrontendArtefactError(f"{where}: missing tensor {err}.") from err
+            n, d = info["n_components"], info["input_dim"]
+            shapes = {"mean": (d,), "components": (n, d), "explained_variance": (n,), "explained_variance_ratio": (n,)}
+            arrays = {}
+            for array, shape in shapes.items():
+                key = f"{name}/{array}"
+                if key not in tensors:
+                    raise FrontendArtefactError(f"{where}: missing tensor '{key}'.")
+                arrays[array] = np.asarray(tensors[key])
+                if arrays[array].shape != shape:
+                    raise FrontendArtefactError(
+                        f"{where}: tensor '{key}' has shape {arrays[array].shape}, {METADATA_FILE} says {shape}."
+                    )
+            for array in ("mean", "components"):  # the ratio is NaN when the fitting data had no variance
+                check_finite(arrays[array], str(where), f"{name}/{array}")
             return PCABasis(**arrays, components_with_variance=info["components_with_variance"],
                             num_samples=info["num_samples"])
 

@@ -30,6 +30,11 @@ class FrontendProcessorStep(ProcessorStep):
     features are repeated, which the policy masks out of the free energy (Eq. 9). Without the mark every
     step is encoded.
 
+    A camera frame that is missing from the observation or holds non-finite pixels cannot be encoded: that
+    environment's visual features become NaN for the step, which the policy treats as an unavailable
+    observation (masked out of the free energy, `on_bad_observation`); the other environments are encoded
+    as usual.
+
     The artefact's JSON description is this step's config and its PCA arrays are its state, so the front
     end is saved with every checkpoint (`policy_preprocessor*.json/.safetensors`) and pushed with it.
 
@@ -84,21 +89,12 @@ class FrontendProcessorStep(ProcessorStep):
             return transition  # training batch: cached columns from the converter
         frontend = self.frontend()
         fresh = observation.get(OBS_IMAGE_FRESH)
-        if self._vision is None or fresh is None or bool(torch.as_tensor(fresh).any()):
-            missing = [key for key in frontend.artefact.cameras if key not in observation]
-            if missing:
-                raise KeyError(
-                    f"PredVLA's front end needs the camera images {missing}; the observation has "
-                    f"{sorted(observation)}. On a robot, name its cameras as in the training dataset; in LIBERO, "
-                    "evaluate with --env.type=predvla_libero (or libero)."
-                )
-            images = {key: observation[key] for key in frontend.artefact.cameras}
-            with torch.no_grad():
-                self._vision = frontend.encode_images(images)
         tasks = (transition.get(TransitionKey.COMPLEMENTARY_DATA) or {}).get("task")
         if tasks is None:
             raise KeyError("PredVLA's front end needs the task instruction ('task') to compute language features.")
         tasks = [tasks] if isinstance(tasks, str) else list(tasks)
+        if self._vision is None or fresh is None or bool(torch.as_tensor(fresh).any()):
+            self._vision = self._encode_frame(frontend, observation, len(tasks))
         for text in set(tasks) - set(self._language):
             self._language[text] = frontend.encode_instructions([text])[0]
         new_observation = dict(observation)
@@ -107,6 +103,35 @@ class FrontendProcessorStep(ProcessorStep):
         new_transition = dict(transition)
         new_transition[TransitionKey.OBSERVATION] = new_observation
         return new_transition
+
+    def _encode_frame(self, frontend: FrozenFrontend, observation: dict, batch_size: int) -> torch.Tensor:
+        """Visual features (batch, vision_dim); NaN rows where a camera frame is missing or non-finite."""
+        cameras = list(frontend.artefact.cameras)
+        present = {key: torch.as_tensor(observation[key]) for key in cameras if key in observation}
+        others = sorted(k for k in observation if k.startswith("observation.images.") and k not in cameras)
+        if not present and others:  # images under other names: the robot's cameras are misnamed, not dropped
+            raise KeyError(
+                f"PredVLA's front end needs the camera images {cameras}; the observation has {others}. On a robot, "
+                "name its cameras as in the training dataset; in LIBERO, evaluate with --env.type=predvla_libero "
+                "(or libero)."
+            )
+        if not present:  # every camera dropped this step: masked out of the free energy
+            return torch.full((batch_size, frontend.artefact.vision_dim), float("nan"))
+        batched = {key: x[None] if x.dim() == 3 else x for key, x in present.items()}
+        template = next(iter(batched.values()))
+        bad = torch.zeros(template.shape[0], dtype=torch.bool, device=template.device)
+        images = {}
+        for key in cameras:
+            x = batched.get(key)
+            if x is None:
+                x, bad = torch.zeros_like(template), torch.ones_like(bad)
+            elif x.is_floating_point():
+                rows = ~torch.isfinite(x).flatten(1).all(1)
+                x, bad = torch.where(rows[:, None, None, None], torch.zeros((), dtype=x.dtype), x), bad | rows
+            images[key] = x
+        with torch.no_grad():
+            vision = frontend.encode_images(images)
+        return torch.where(bad[:, None].to(vision.device), torch.full((), float("nan")), vision)
 
     def transform_features(
         self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]

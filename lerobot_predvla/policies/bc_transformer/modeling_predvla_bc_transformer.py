@@ -89,4 +89,5 @@ class PredVLABCTransformerPolicy(ObservationPolicy):
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
-        return self.chunk(*self.observe(batch))
+        chunk = self.chunk(*self.observe(batch))
+        return self.guard.safe_action(chunk.flatten(1)).unflatten(1, chunk.shape[1:])

@@ -19,6 +19,8 @@ OBS_LANGUAGE_FEATURES = "observation.language_features"
 FRONTEND_META_DIR = "meta/predvla_frontend"  # the front-end artefact copy a converted dataset carries
 # The sizes a policy takes from its dataset's features; Table 1's defaults are LIBERO's Panda.
 LAYOUT_FIELDS = ("num_cameras", "proprio_dim", "action_dim", "vision_dim_per_camera", "language_dim")
+BAD_OBSERVATION_MODES = ("mask", "raise")  # acting on a missing or non-finite observation channel
+NONFINITE_TRAINING_MODES = ("stop", "skip")  # training on a batch with a non-finite loss or gradient
 
 
 def cached_feature_normalization() -> dict[str, NormalizationMode]:
@@ -71,6 +73,16 @@ class CachedFeaturesConfig(PreTrainedConfig):
         optimizer_lr: Adam learning rate of the network weights, constant (Table 2, PredVLA: 6e-5).
         optimizer_weight_decay: Weight decay on network weights (Table 2: 1e-4).
         grad_clip_norm: Gradient-norm clip (Table 2: "enabled"; the value is not given, 1.0 is ours).
+        on_bad_observation: What acting does with a missing or non-finite observation channel (vision
+            features, proprioception) of one environment at one control step. "mask" (default): the channel
+            is left out of that step (PredVLA: its prediction error leaves the free energy, Section 3.3; the
+            baselines: it is replaced by zeros), counted and logged once per episode; the action stays
+            finite. "raise": stop with an error naming the channel, environment and step (for users who
+            would rather stop the robot). See docs/reliability.md.
+        on_nonfinite_training: What training does when a batch's loss or gradient is non-finite. "stop"
+            (default): lerobot-train stops with one line naming the step and the loss terms, before any
+            checkpoint is written. "skip": the batch changes no weight (and no posterior); it is counted and
+            logged.
     """
 
     language_dim: int = 64
@@ -89,6 +101,9 @@ class CachedFeaturesConfig(PreTrainedConfig):
     optimizer_lr: float = 6e-5
     optimizer_weight_decay: float = 1e-4
     grad_clip_norm: float = 1.0
+    # Faults and bad input (docs/reliability.md).
+    on_bad_observation: str = "mask"
+    on_nonfinite_training: str = "stop"
 
     normalization_mapping: dict[str, NormalizationMode] = field(default_factory=cached_feature_normalization)
 
@@ -98,6 +113,15 @@ class CachedFeaturesConfig(PreTrainedConfig):
             raise ValueError(f"`visual_refresh_interval` must be >= 1, got {self.visual_refresh_interval}.")
         if self.sequence_length < 1:
             raise ValueError(f"`sequence_length` must be >= 1, got {self.sequence_length}.")
+        if self.on_bad_observation not in BAD_OBSERVATION_MODES:
+            raise ValueError(
+                f"`on_bad_observation` must be one of {BAD_OBSERVATION_MODES}, got {self.on_bad_observation!r}."
+            )
+        if self.on_nonfinite_training not in NONFINITE_TRAINING_MODES:
+            raise ValueError(
+                f"`on_nonfinite_training` must be one of {NONFINITE_TRAINING_MODES}, "
+                f"got {self.on_nonfinite_training!r}."
+            )
 
     @property
     def vision_dim(self) -> int:

@@ -3,7 +3,8 @@
 They read the same cached front-end columns as PredVLA (Sections 4.1, 4.4), train on whole episodes held in
 memory (`EpisodeSequences`) with the negative log-likelihood of the same Gaussian-mixture action head, and
 act without error regression. Vision is refreshed every `visual_refresh_interval` control steps and held in
-between, in training and at evaluation alike.
+between, in training and at evaluation alike. A missing or non-finite observation (`ObservationGuard`) is not
+an input: the environment keeps its last available frame of that channel (zeros before the first).
 """
 
 import logging
@@ -12,19 +13,19 @@ from pathlib import Path
 
 import torch
 from lerobot.policies.pretrained import PreTrainedPolicy
-from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
 
 from lerobot_predvla.policies.common.cached_features import (
-    OBS_LANGUAGE_FEATURES,
-    OBS_VISION_FEATURES,
     CachedFeaturesConfig,
     feature_layout,
     has_paper_layout,
     use_dataset_frontend,
 )
+from lerobot_predvla.policies.common.observation_guard import ObservationGuard
+from lerobot_predvla.policies.common.training_guard import TrainingGuard
 from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
 from lerobot_predvla.utils.parameters import count_parameters
+from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
 
 BASELINE_TRAIN_STEPS = 50_000  # Section 4.4: baselines train for 50,000 steps (PredVLA: 30,000)
 
@@ -80,6 +81,7 @@ class ObservationPolicy(PreTrainedPolicy):
         if dataset_meta is not None:
             use_dataset_frontend(config, Path(dataset_meta.root))
             self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
+        self.training_guard = TrainingGuard(self, config.on_nonfinite_training, self.name)
 
     def log_parameter_count(self) -> None:
         """Start-up line: our trainable parameters and layout, beside the paper's count at its layout (Tables 4
@@ -92,6 +94,14 @@ class ObservationPolicy(PreTrainedPolicy):
 
     def get_optim_params(self) -> list[dict]:
         return [{"params": [p for p in self.parameters() if p.requires_grad]}]
+
+    @classmethod
+    def _load_as_safetensor(cls, model: "ObservationPolicy", model_file: str, map_location: str, strict: bool):
+        """Weights read and checked whole (`safe_loading`) before any is loaded."""
+        state, _ = read_safetensors(model_file)
+        check_tensors(model_file, state, {k: v.detach().cpu() for k, v in model.state_dict().items()})
+        model.load_state_dict(state)
+        return model
 
     def training_sequences(self, batch: dict[str, Tensor]) -> dict[str, Tensor]:
         """Whole episodes of the batch's `episode_index`, time-major, vision held between refreshes."""
@@ -112,7 +122,8 @@ class ObservationPolicy(PreTrainedPolicy):
                 "is not supported."
             )
         loss, terms = self.sequence_loss(self.training_sequences(batch))
-        return loss, {k: v.item() for k, v in terms.items()}
+        values = {k: v.item() for k, v in terms.items()}
+        return self.training_guard.check_loss(loss, values), values
 
     def sequence_loss(self, seq: dict[str, Tensor]) -> tuple[Tensor, dict[str, Tensor]]:
         raise NotImplementedError
@@ -120,20 +131,30 @@ class ObservationPolicy(PreTrainedPolicy):
     # ----- acting ------------------------------------------------------------------------------------------
     def reset(self) -> None:
         self.control_step = 0
-        self.vision: Tensor | None = None  # the latest refreshed frame
+        # The latest available inputs per environment: the refreshed frame, proprioception and language.
+        self.held: list[Tensor] | None = None
+        if not hasattr(self, "guard"):
+            self.guard = ObservationGuard.for_policy(self.config, self.name)
+        self.guard.reset()
 
     def observe(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor, Tensor]:
-        """(language, held vision, proprio) of this control step, each (batch, dim)."""
-        inputs = [batch[k] for k in (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE)]
-        language, vision, proprio = [x[None] if x.dim() == 1 else x for x in inputs]
-        if self.control_step % self.config.visual_refresh_interval == 0:
-            self.vision = vision
+        """(language, held vision, proprio) of this control step, each (batch, dim); an unavailable row keeps
+        the environment's last available value."""
+        values, available = self.guard(batch)
+        if self.held is None:
+            self.held = values  # unavailable rows are zeros
+        refresh = self.control_step % self.config.visual_refresh_interval == 0
+        self.held = [
+            torch.where(ok[:, None], new, old) if (i != 1 or refresh) else old
+            for i, (new, old, ok) in enumerate(zip(values, self.held, available, strict=True))
+        ]
         self.control_step += 1
-        return language, self.vision, proprio
+        return tuple(self.held)
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
-        return self.act(*self.observe(batch))
+        """The action of this control step, always finite (`ObservationGuard.safe_action`)."""
+        return self.guard.safe_action(self.act(*self.observe(batch)))
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:

@@ -4,6 +4,11 @@ At each control step: append the observation, initialise the newest posteriors f
 (Eqs. 1-2), run `er_iterations` Adam steps on the window's posteriors against the free energy (Eq. 9)
 with the network frozen, regenerating the states from the window start after each update, and decode
 the action from A_bottom. With zero iterations no observation is ever read: exact open loop.
+
+Unavailable observations (`ObservationGuard`) arrive as zero rows with an availability flag per environment:
+their prediction-error terms are weighted by 0 in the free energy, so they never reach the posteriors or the
+state. Should an environment's posteriors still become non-finite, they revert to their values before the
+update (its prediction for this step), and `prior_action` holds the open-loop action as a finite fallback.
 """
 
 from collections.abc import Callable, Iterator
@@ -48,29 +53,41 @@ class ErrorRegression:
         self.posteriors: list[Tensor] = []  # one (batch, 4r) tensor per window step
         self.vision: list[Tensor] = []
         self.proprio: list[Tensor] = []
-        self.fresh: list[bool] = []  # whether the step had a fresh visual observation
+        # Per step, (batch,) weights of the prediction errors: 1 where the observation counts, 0 where it is
+        # unavailable or (vision) not a fresh frame.
+        self.vision_weight: list[Tensor] = []
+        self.proprio_weight: list[Tensor] = []
+        self.prior_action: Tensor | None = None  # open-loop action of the newest step
+        self.reverted = 0  # environment-steps whose posteriors became non-finite and were reverted
 
     def free_energy(self, traj: Trajectory, c_q: Tensor) -> Tensor:
         """E over the window (Eq. 9) with the inference weights w_ER, er_lambda_v, er_lambda_q."""
         cfg = self.config
         eps_v, eps_q = self.model.prediction_errors(traj, torch.stack(self.vision), torch.stack(self.proprio))
-        fresh = eps_v.new_tensor(self.fresh)[:, None]
+        w_v, w_q = torch.stack(self.vision_weight), torch.stack(self.proprio_weight)
         complexity = self.model.complexity(c_q, self.model.priors(traj), (cfg.er_complexity_weight,) * 4)
-        return (cfg.er_lambda_v * eps_v * fresh + cfg.er_lambda_q * eps_q + complexity).sum()
+        return (cfg.er_lambda_v * eps_v * w_v + cfg.er_lambda_q * eps_q * w_q + complexity).sum()
 
-    def __call__(self, language: Tensor, vision: Tensor, proprio: Tensor) -> Tensor:
+    def __call__(
+        self, language: Tensor, vision: Tensor, proprio: Tensor,
+        vision_available: Tensor | None = None, proprio_available: Tensor | None = None,
+    ) -> Tensor:
         """One control step for a batch; returns the action (batch, action_dim) in normalised units."""
-        open_loop_action = self.observe(language, vision, proprio)
+        open_loop_action = self.observe(language, vision, proprio, vision_available, proprio_available)
         if open_loop_action is not None:
             return open_loop_action
         self.infer()
         return self.act()
 
-    def observe(self, language: Tensor, vision: Tensor, proprio: Tensor) -> Tensor | None:
+    def observe(
+        self, language: Tensor, vision: Tensor, proprio: Tensor,
+        vision_available: Tensor | None = None, proprio_available: Tensor | None = None,
+    ) -> Tensor | None:
         """Step 1: append the observation; the newest posteriors start at their priors (Eqs. 1-2).
 
-        Returns the action directly in exact open loop (`er_iterations == 0`), where observations are
-        never stored nor read.
+        `vision_available`, `proprio_available` (batch,) bool: False masks that environment's prediction
+        error of this step (default: all available). Returns the action directly in exact open loop
+        (`er_iterations == 0`), where observations are never stored nor read.
         """
         model, cfg = self.model, self.config
         if self.state is None:
@@ -81,17 +98,22 @@ class ErrorRegression:
             state, params, prior = model.step(self.state, self.lang_term, None)
         fresh = self.step_index % cfg.visual_refresh_interval == 0
         self.step_index += 1
+        self.prior_action = GMMActionHead.mode(params[0], params[1])
         if cfg.er_iterations == 0:
             self.state = state
-            return GMMActionHead.mode(params[0], params[1])
+            return self.prior_action
+        ones = torch.ones(vision.shape[0], dtype=torch.bool, device=vision.device)
+        vision_ok = ones if vision_available is None else vision_available
+        proprio_ok = ones if proprio_available is None else proprio_available
         self.posteriors.append(prior)
         self.vision.append(vision)
         self.proprio.append(proprio)
-        self.fresh.append(fresh)
+        self.vision_weight.append((vision_ok & fresh).to(vision.dtype))
+        self.proprio_weight.append(proprio_ok.to(proprio.dtype))
         if len(self.posteriors) > cfg.er_window:  # slide: the oldest posterior is final
             with torch.no_grad():
                 self.start_state = self.rollout(self.start_state, self.lang_term, self.posteriors[0][None]).final
-            for buffer in (self.posteriors, self.vision, self.proprio, self.fresh):
+            for buffer in (self.posteriors, self.vision, self.proprio, self.vision_weight, self.proprio_weight):
                 del buffer[0]
         return None
 
@@ -103,7 +125,8 @@ class ErrorRegression:
 
     def infer(self) -> None:
         """Step 2: n_itr Adam steps on the window's posteriors, network frozen, states regenerated."""
-        c_q = torch.stack(self.posteriors).requires_grad_(True)
+        before = torch.stack(self.posteriors)
+        c_q = before.clone().requires_grad_(True)
         optimizer = torch.optim.Adam([c_q], lr=self.config.er_lr)
         with frozen(self.model):
             for _ in range(self.config.er_iterations):
@@ -111,7 +134,12 @@ class ErrorRegression:
                 optimizer.zero_grad(set_to_none=True)
                 self.free_energy(traj, c_q).backward(inputs=[c_q])
                 optimizer.step()
-        self.posteriors = list(c_q.detach().unbind(0))
+        c_q = c_q.detach()
+        diverged = ~torch.isfinite(c_q).all(dim=0).all(dim=-1)  # (batch,)
+        if bool(diverged.any()):
+            self.reverted += int(diverged.sum())
+            c_q = torch.where(diverged[None, :, None], before, c_q)
+        self.posteriors = list(c_q.unbind(0))
 
     def act(self) -> Tensor:
         """Step 3: regenerate the window from the updated posteriors and decode the action from A_bottom."""

@@ -6,23 +6,22 @@ from pathlib import Path
 
 import torch
 from lerobot.policies.pretrained import PreTrainedPolicy
-from lerobot.utils.constants import OBS_STATE
-from safetensors.torch import load_file
 from torch import Tensor
 
 from lerobot_predvla.policies.common.cached_features import (
-    OBS_LANGUAGE_FEATURES,
-    OBS_VISION_FEATURES,
     feature_layout,
     has_paper_layout,
     use_dataset_frontend,
 )
+from lerobot_predvla.policies.common.observation_guard import ObservationGuard
+from lerobot_predvla.policies.common.training_guard import TrainingGuard
 from lerobot_predvla.policies.predvla.configuration_predvla import PREDVLA_PAPER_PARAMETERS, PredVLAConfig
 from lerobot_predvla.policies.predvla.corruption import ObservationCorruption
 from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
 from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
+from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
 
 
 def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
@@ -69,6 +68,7 @@ class PredVLAPolicy(PreTrainedPolicy):
             )
         self._write_posteriors = True
         self.corruption = ObservationCorruption.from_config(config)  # Section 4.4; None unless configured
+        self.training_guard = TrainingGuard(self, config.on_nonfinite_training, self.name)
         self.reset()
 
     # ----- parameters, saving, loading -------------------------------------------------------------
@@ -140,9 +140,15 @@ class PredVLAPolicy(PreTrainedPolicy):
 
     @classmethod
     def _load_as_safetensor(cls, model: "PredVLAPolicy", model_file: str, map_location: str, strict: bool):
-        model.load_state_dict(load_file(model_file, device="cpu"))
+        """Weights (and, resuming training, posteriors) read and checked whole before either is loaded."""
+        state, _ = read_safetensors(model_file)
+        check_tensors(model_file, state, {k: v.detach().cpu() for k, v in model.state_dict().items()})
+        posteriors = None
         if model.posterior_store is not None:  # resuming training: restore the posteriors too
-            model.posterior_store.load(Path(model_file).parent)
+            posteriors = model.posterior_store.read(Path(model_file).parent)
+        model.load_state_dict(state)
+        if posteriors is not None:
+            model.posterior_store.assign(posteriors)
         return model
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
@@ -190,27 +196,36 @@ class PredVLAPolicy(PreTrainedPolicy):
             cfg.lambda_v * terms["vision_error"] + cfg.lambda_q * terms["proprio_error"]
             + cfg.lambda_a * terms["action_nll"] + terms["complexity"]
         )
-        return loss, {k: v.item() for k, v in terms.items()}
+        values = {k: v.item() for k, v in terms.items()}
+        return self.training_guard.check_loss(loss, values), values
 
     # ----- acting --------------------------------------------------------------------------------------
     def reset(self) -> None:
-        """Clear the error-regression window (called at every environment reset)."""
+        """Clear the error-regression window (called at every environment reset); log the finished episode's
+        unavailable observations, if any."""
         self.error_regression = ErrorRegression(self.model)
         self.control_step = 0
+        if not hasattr(self, "guard"):
+            self.guard = ObservationGuard.for_policy(self.config, self.name)
+        self.guard.reset()
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
         return self.select_action(batch)[:, None]
 
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
-        """One control step of error regression; works under lerobot-eval's `torch.inference_mode()`."""
+        """One control step of error regression; works under lerobot-eval's `torch.inference_mode()`.
+
+        A missing or non-finite vision or proprio row is masked out of that environment's free energy
+        (`on_bad_observation`); the returned action is always finite.
+        """
         if self.corruption is not None:  # the corrupted observation is what error regression sees
             batch = self.corruption(self.control_step, batch)
         self.control_step += 1
+        (language, vision, proprio), (_, vision_ok, proprio_ok) = self.guard(batch)
         with torch.inference_mode(False), torch.enable_grad():
             # Inputs created in inference mode cannot enter autograd: clone them out of it.
-            inputs = [batch[k].clone() for k in (OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES, OBS_STATE)]
-            inputs = [x[None] if x.dim() == 1 else x for x in inputs]
-            action = self.error_regression(*inputs)
-        return action.detach()
+            inputs = [x.clone() for x in (language, vision, proprio, vision_ok, proprio_ok)]
+            action = self.error_regression(*inputs).detach()
+            return self.guard.safe_action(action, self.error_regression.prior_action.detach())
 

@@ -8,8 +8,10 @@ written to its own file in training checkpoints and never to `model.safetensors`
 from pathlib import Path
 
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import save_file
 from torch import Tensor, nn
+
+from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
 
 POSTERIOR_STORE_FILE = "posterior_store.safetensors"
 
@@ -35,17 +37,17 @@ class PosteriorStore(nn.Module):
         save_file({"latents": self.latents.detach().cpu().contiguous()}, str(tmp))
         tmp.replace(directory / POSTERIOR_STORE_FILE)
 
-    def load(self, directory: Path) -> bool:
-        """Load the store saved beside a checkpoint's weights; False when there is none."""
+    def read(self, directory: Path) -> Tensor | None:
+        """The store saved beside a checkpoint's weights, checked (readable, finite, of this dataset's and
+        config's shape: episodes, sequence_length, 4r) but not loaded; None when there is none."""
         path = Path(directory) / POSTERIOR_STORE_FILE
         if not path.is_file():
-            return False
-        latents = load_file(str(path))["latents"]
-        if latents.shape != self.latents.shape:
-            raise ValueError(
-                f"{path}: posterior store of shape {tuple(latents.shape)} does not match this dataset and "
-                f"config, which need {tuple(self.latents.shape)} (episodes, sequence_length, 4r)."
-            )
+            return None
+        tensors, _ = read_safetensors(path)
+        check_tensors(path, tensors, {"latents": self.latents.detach().cpu()})
+        return tensors["latents"]
+
+    def assign(self, latents: Tensor) -> None:
         with torch.no_grad():
             self.latents.copy_(latents)
-        return True
+

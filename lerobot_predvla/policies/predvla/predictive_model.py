@@ -69,7 +69,13 @@ class GMMActionHead(nn.Module):
 
     @staticmethod
     def distribution(logits: Tensor, means: Tensor, scales: Tensor) -> MixtureSameFamily:
-        return MixtureSameFamily(Categorical(logits=logits), Independent(Normal(means, scales), 1))
+        """The mixture; arguments are not validated, so a non-finite parameter gives a non-finite NLL, which
+        the training guard reports with the step and loss terms (docs/reliability.md)."""
+        return MixtureSameFamily(
+            Categorical(logits=logits, validate_args=False),
+            Independent(Normal(means, scales, validate_args=False), 1, validate_args=False),
+            validate_args=False,
+        )
 
     @staticmethod
     def mode(logits: Tensor, means: Tensor) -> Tensor:
