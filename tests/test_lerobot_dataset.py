@@ -89,6 +89,7 @@ def data_table(root: Path) -> pa.Table:
     return pa.concat_tables([pq.read_table(f) for f in sorted((root / "data").glob("*/*.parquet"))])
 
 
+@pytest.mark.slow  # its fixture trains with lerobot-train
 def test_conversion_keeps_every_column_and_adds_the_features(layout):
     root = layout["root"]
     source, converted = data_table(root / "source"), data_table(root / "converted")
@@ -116,6 +117,7 @@ def test_conversion_keeps_every_column_and_adds_the_features(layout):
                                atol=0)
 
 
+@pytest.mark.slow  # its fixture trains with lerobot-train
 def test_lerobot_train_takes_the_sizes_from_the_dataset(layout):
     from lerobot_predvla import PredVLAPolicy
 
@@ -128,6 +130,7 @@ def test_lerobot_train_takes_the_sizes_from_the_dataset(layout):
     assert f"PredVLA: {count:,} trainable parameters ({layout_text})" in layout["train_log"]
 
 
+@pytest.mark.slow  # its fixture trains with lerobot-train
 def test_acts_from_raw_frames_through_the_checkpoints_processors(layout):
     """As `lerobot-rollout --policy.path=...` calls it: raw uint8 frames, state and task -> robot action."""
     from lerobot.common.control_utils import predict_action
@@ -165,6 +168,7 @@ def test_acts_from_raw_frames_through_the_checkpoints_processors(layout):
     torch.testing.assert_close(raw_actions, torch.cat(cached_actions), rtol=1e-4, atol=1e-4)
 
 
+@pytest.mark.slow  # its fixture trains with lerobot-train
 def test_cameras_flag_chooses_the_streams(layout, tmp_path):
     root = layout["root"]
     wrist = list(layout["layout"].cameras)[1]
@@ -303,6 +307,8 @@ def test_state_processor_follows_the_policys_state():
         make_env_pre_post_processors(PredVLALiberoEnv(task="libero_object", task_ids=[0]), PredVLAConfig(proprio_dim=8))
 
 
+@pytest.mark.slow
+@pytest.mark.simulator
 def test_lerobot_eval_on_libero_with_lerobots_state(libero_layout, tmp_path):
     """A policy trained on the community layout (state 8) runs in the real simulator under `lerobot-eval`."""
     log = run([str(BIN / "lerobot-eval"), f"--policy.path={libero_layout['checkpoint']}", "--env.type=libero",
@@ -315,6 +321,7 @@ def test_lerobot_eval_on_libero_with_lerobots_state(libero_layout, tmp_path):
     assert 0.0 <= info["overall"]["pc_success"] <= 100.0
 
 
+@pytest.mark.slow  # its fixture trains with lerobot-train
 def test_model_card_describes_the_robots_own_layout(so101_layout):
     from lerobot_predvla.hub.publish import publishable_files, render_card
 
