@@ -172,10 +172,11 @@ def replay_error_regression(policy: PredVLAPolicy, data: TaskData, episodes: lis
             eps_v, eps_q = model.prediction_errors(traj, torch.stack(er.vision), torch.stack(er.proprio))
             c_p = model.priors(traj)
             complexity = model.complexity(c_q[-1:], c_p[-1:], (cfg.er_complexity_weight,) * 4)[0]
-            fresh = er.fresh[-1]  # the visual error counts on refresh steps only (Section 4.3)
-            records["eps_v"].append(eps_v[-1] if fresh else torch.full_like(eps_v[-1], float("nan")))
+            # The visual error counts on refresh steps only (Section 4.3): the newest step's weight is 0 or 1.
+            w_v, w_q = er.vision_weight[-1], er.proprio_weight[-1]
+            records["eps_v"].append(torch.where(w_v > 0, eps_v[-1], torch.full_like(eps_v[-1], float("nan"))))
             records["eps_q"].append(eps_q[-1])
-            records["free_energy"].append(cfg.er_lambda_v * eps_v[-1] * float(fresh) + cfg.er_lambda_q * eps_q[-1]
+            records["free_energy"].append(cfg.er_lambda_v * eps_v[-1] * w_v + cfg.er_lambda_q * eps_q[-1] * w_q
                                           + complexity)
             records["gap"].append((c_q[-1] - c_p[-1]).unflatten(-1, (4, r)).norm(dim=-1))
             records["action"].append(traj.final.a_hat)
