@@ -106,6 +106,7 @@ def artefact_dir(tmp_path) -> Path:
     return artefact.save(tmp_path / "frontend")
 
 
+@pytest.mark.slow
 def test_lerobot_train_push_uses_predvla_card_and_never_posteriors(trained_and_pushed):
     checkpoint, snapshot, commits = trained_and_pushed
     assert (checkpoint / POSTERIOR_STORE_FILE).is_file()  # the training checkpoint has them ...

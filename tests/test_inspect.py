@@ -7,6 +7,8 @@ from test_lerobot_cli import train
 
 from lerobot_predvla.cli import main
 
+pytestmark = pytest.mark.slow  # trains with the real lerobot-train
+
 
 @pytest.fixture(scope="module")
 def trained(synthetic_dataset, tmp_path_factory):

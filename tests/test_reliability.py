@@ -273,6 +273,7 @@ def checkpoints_are_finite(out: Path) -> list[Path]:
     return files
 
 
+@pytest.mark.slow
 def test_lerobot_train_stops_on_divergence_before_a_nonfinite_checkpoint(synthetic_dataset, tmp_path):
     """A learning rate of 1e30 makes the loss non-finite within a few steps of the real lerobot-train."""
     result = run_lerobot_train(synthetic_dataset, tmp_path / "run")
@@ -285,6 +286,7 @@ def test_lerobot_train_stops_on_divergence_before_a_nonfinite_checkpoint(synthet
     assert len({f.parent.parent.name for f in files}) == step - 1  # every completed step was saved, finite
 
 
+@pytest.mark.slow
 def test_lerobot_train_skips_nonfinite_batches_when_asked(synthetic_dataset, tmp_path):
     result = run_lerobot_train(synthetic_dataset, tmp_path / "run", "--policy.on_nonfinite_training=skip")
     assert result.returncode == 0, result.stderr[-3000:]

@@ -15,6 +15,8 @@ from lerobot_predvla.frontend import FrozenFrontend
 from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
 from lerobot_predvla.policies.common.cached_features import OBS_VISION_FEATURES
 
+pytestmark = [pytest.mark.simulator, pytest.mark.slow]
+
 # Run lerobot-eval's own entry point with LiberoEnv.step patched: sub-environment 1 raises at its 2nd step of
 # the first rollout, sub-environment 0 gets a NaN joint position at its 3rd step of the second rollout.
 FAULTY_EVAL = """

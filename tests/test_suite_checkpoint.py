@@ -4,7 +4,10 @@ LIBERO observation (the quickstart's `lerobot-eval --policy.path=checkpoints/pre
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
+
+pytestmark = pytest.mark.simulator
 
 CHECKPOINT = Path(__file__).parents[1] / "checkpoints" / "predvla_libero_object"
 
