@@ -309,3 +309,47 @@ def test_lr_decay_option_decays_both_groups_along_a_cosine():
         scheduler.step()
     assert rates[0] == pytest.approx([1e-3, 1e-2]) and rates[50] == pytest.approx([5.5e-4, 5.5e-3])
     assert rates[100] == pytest.approx([1e-4, 1e-3])
+
+
+def test_open_loop_term_trains_the_prior_chain_on_the_same_episodes(trained_policy):
+    """`open_loop_weight` beta (a CPU-recipe option; 0 is Eq. 10): loss = Eq. 10 + beta x (lambda_v eps_v +
+    lambda_q eps_q + lambda_a NLL) on the exact open-loop rollout (every posterior at its prior), and its
+    gradient reaches the priors and W_lang but never the posteriors."""
+    from lerobot_predvla.policies.predvla.reference import reference_rollout
+
+    policy, episodes = trained_policy.train(), torch.tensor([1, 4, 6])
+    cfg = policy.config
+    with torch.no_grad():
+        base, base_terms = policy.forward({"episode_index": episodes})
+    assert not any(k.startswith("open_loop") for k in base_terms)
+    cfg.open_loop_weight = 0.5
+    try:
+        policy.zero_grad()
+        loss, terms = policy.forward({"episode_index": episodes})
+        loss.backward()
+        seq = policy.sequences.batch(episodes, torch.device("cpu"))
+        with torch.no_grad():
+            model = policy.model
+            ref = reference_rollout(model, model.initial_state(3), model.language_term(seq["language"]),
+                                    steps=seq["valid"].shape[0])
+            nll = model.action_nll(ref, seq["action"])
+            _, eps_q = model.prediction_errors(ref, seq["vision"], seq["state"])
+        valid = seq["valid"]
+        assert terms["open_loop_action_nll"] == pytest.approx((nll * valid).sum().item() / valid.sum().item(),
+                                                              rel=1e-4)
+        assert terms["open_loop_proprio_error"] == pytest.approx(
+            (eps_q * valid).sum().item() / valid.sum().item(), rel=1e-4)
+        extra = terms["open_loop_vision_error"] + terms["open_loop_proprio_error"] + terms["open_loop_action_nll"]
+        assert loss.item() == pytest.approx(base.item() + 0.5 * extra, rel=1e-5)
+        # The open-loop chain uses no posterior, so the posteriors' gradient is Eq. 10's alone.
+        post_grad = policy.posterior_store.latents.grad.clone()
+        cfg.open_loop_weight = 0.0
+        policy.zero_grad()
+        policy.forward({"episode_index": episodes})[0].backward()
+        assert torch.allclose(post_grad, policy.posterior_store.latents.grad, atol=1e-6)
+        assert policy.model.lang.weight.grad is not None
+    finally:
+        cfg.open_loop_weight = 0.0
+        policy.eval()
+    with pytest.raises(ValueError, match="open_loop_weight"):
+        PredVLAConfig(open_loop_weight=-1.0)

@@ -59,6 +59,14 @@ class PredVLAConfig(CachedFeaturesConfig):
             mask-normalised bar on the errors and the NLL but not on C; averaged over the batch. "mean": the
             mask-normalised mean, like the other terms (about T times weaker; it leaves the priors far from
             the posteriors on short schedules, see the README).
+        open_loop_weight: beta >= 0, weight of an extra training term, not in the paper (0, the default, is
+            Eq. 10 alone): the accuracy and action terms of Eq. 10 (lambda_v eps_v + lambda_q eps_q +
+            lambda_a NLL) again on the exact open-loop rollout of the same episodes, every posterior at its
+            prior (Section 3.5; the rollout of `er_iterations=0`). Eq. 10 trains the states regenerated from
+            the posteriors, while acting starts every step from the priors; on short CPU schedules the task
+            then drifts into the training posteriors and the open-loop chain degrades
+            (docs/libero_object_cpu.md). This term trains the prior chain itself to follow the
+            demonstrations; the CPU recipe `configs/policy/predvla_cpu.json` uses it.
         er_window: Error-regression window W in control steps (Table 2: 40).
         er_iterations: Adam iterations n_itr per control step (Table 2: 10). 0 is exact open loop.
         er_lr: Adam step size eta of error regression (Table 2: 0.05).
@@ -102,6 +110,7 @@ class PredVLAConfig(CachedFeaturesConfig):
     lambda_a: float = 1.0
     complexity_weights: tuple[float, float, float, float] = (0.05, 0.02, 0.02, 0.01)
     complexity_reduction: str = "sum"
+    open_loop_weight: float = 0.0  # not in Table 2: 0 is the paper's Eq. 10
 
     # Online error regression (Table 2).
     er_window: int = 40
@@ -128,6 +137,8 @@ class PredVLAConfig(CachedFeaturesConfig):
             raise ValueError(
                 f"`complexity_reduction` must be one of {COMPLEXITY_REDUCTIONS}, got {self.complexity_reduction!r}."
             )
+        if self.open_loop_weight < 0.0:
+            raise ValueError(f"`open_loop_weight` must be >= 0, got {self.open_loop_weight}.")
         if min(self.tau) < 1.0:
             raise ValueError(f"`tau` values must be >= 1 (Eq. 3), got {self.tau}.")
         if self.er_window < 1 or self.er_iterations < 0:

@@ -177,9 +177,8 @@ class PredVLAPolicy(PreTrainedPolicy):
         seq = self.sequences.batch(episode_index, self.posterior_store.latents.device)
         c_q = self.posterior_store.gather(episode_index.to(self.posterior_store.latents.device))
         model = self.model
-        traj = model.rollout(
-            model.initial_state(len(episode_index)), model.language_term(seq["language"]), c_q
-        )
+        lang_term = model.language_term(seq["language"])
+        traj = model.rollout(model.initial_state(len(episode_index)), lang_term, c_q)
         valid = seq["valid"]
         steps = torch.arange(valid.shape[0], device=valid.device)[:, None]
         fresh = valid & (steps % cfg.visual_refresh_interval == 0)  # visual error only on refresh steps
@@ -196,6 +195,16 @@ class PredVLAPolicy(PreTrainedPolicy):
             cfg.lambda_v * terms["vision_error"] + cfg.lambda_q * terms["proprio_error"]
             + cfg.lambda_a * terms["action_nll"] + terms["complexity"]
         )
+        if cfg.open_loop_weight > 0.0:  # the same accuracy and action terms on the exact open-loop chain
+            open_loop = model.rollout(model.initial_state(len(episode_index)), lang_term, steps=valid.shape[0])
+            eps_v, eps_q = model.prediction_errors(open_loop, seq["vision"], seq["state"])
+            terms["open_loop_vision_error"] = masked_mean(eps_v, fresh)
+            terms["open_loop_proprio_error"] = masked_mean(eps_q, valid)
+            terms["open_loop_action_nll"] = masked_mean(model.action_nll(open_loop, seq["action"]), valid)
+            loss = loss + cfg.open_loop_weight * (
+                cfg.lambda_v * terms["open_loop_vision_error"] + cfg.lambda_q * terms["open_loop_proprio_error"]
+                + cfg.lambda_a * terms["open_loop_action_nll"]
+            )
         values = {k: v.item() for k, v in terms.items()}
         return self.training_guard.check_loss(loss, values), values
 
