@@ -5,6 +5,10 @@ Needs the simulator (`make libero`, which `make test` runs first); without it th
 
 import dataclasses
 import json
+import os
+import re
+import subprocess
+import sys
 
 import h5py
 import numpy as np
@@ -93,6 +97,11 @@ def test_a_stale_config_names_the_file_and_key(tmp_path, monkeypatch):
     monkeypatch.setenv("LIBERO_CONFIG_PATH", str(tmp_path))
     with pytest.raises(RuntimeError, match=r"config.yaml: `bddl_files` is .*gone.*make libero"):
         task_spec(SUITE, TASK_ID)
+    # The eval env (what lerobot-eval imports) checks it too, before LIBERO reads it deep inside a reset.
+    out = subprocess.run([sys.executable, "-c", "import lerobot_predvla.envs.predvla_libero"], capture_output=True,
+                         text=True, env={**os.environ, "LIBERO_CONFIG_PATH": str(tmp_path)})
+    assert out.returncode != 0
+    assert re.search(r"config.yaml: `bddl_files` is .*gone.*make libero", out.stderr.splitlines()[-1])
 
 
 def test_expert_turns_on_the_stove(libero):

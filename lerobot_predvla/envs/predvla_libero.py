@@ -12,10 +12,15 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 from gymnasium import spaces
-from lerobot.envs.libero import LiberoEnv, _get_suite, _select_task_ids, parse_camera_names
-from lerobot.envs.utils import NEW_ROLLOUT_OPTION
-from libero.libero.envs import OffScreenRenderEnv
-from robosuite import macros
+
+from lerobot_predvla.libero.env import check_libero_config
+
+check_libero_config()  # before LIBERO reads its config: a stale one otherwise fails deep inside a reset
+
+from lerobot.envs.libero import LiberoEnv, _get_suite, _select_task_ids, parse_camera_names  # noqa: E402
+from lerobot.envs.utils import NEW_ROLLOUT_OPTION  # noqa: E402
+from libero.libero.envs import OffScreenRenderEnv  # noqa: E402
+from robosuite import macros  # noqa: E402
 
 IMAGE_FRESH = "image_fresh"  # becomes `observation.image_fresh` in LeRobot's preprocess_observation
 UNSTABLE = mujoco.mjtWarning.mjWARN_BADQACC  # MuJoCo's "NaN, Inf or huge value in QACC": it resets the state

@@ -20,8 +20,8 @@ IMAGE_SIZE = 128
 INSTALL_HINT = "LIBERO is not installed in this venv: run `make libero`"
 
 
-def _libero():
-    """Import libero.libero, failing with the install hint (never prompting) if it is not set up."""
+def check_libero_config() -> None:
+    """Fail with the install hint (never prompting) unless LIBERO's config points at existing files."""
     config = config_file()
     if not config.is_file():
         raise RuntimeError(f"{config} missing ({INSTALL_HINT})")
@@ -32,6 +32,11 @@ def _libero():
     if not bddl.is_dir():
         raise RuntimeError(f"{config}: `bddl_files` is {bddl}, which does not exist (a stale config from another "
                            f"environment?); run `make libero` in this checkout to rewrite it")
+
+
+def _libero():
+    """Import libero.libero, failing with the install hint (never prompting) if it is not set up."""
+    check_libero_config()
     try:
         import libero.libero as libero_pkg
         from libero.libero import benchmark
