@@ -62,10 +62,11 @@ def test_every_table_row_has_a_config():
 
 
 def test_cpu_recipe_keeps_the_paper_architecture():
-    """The CPU recipe changes optimisation only: same network, 675,732 parameters."""
+    """The CPU recipe changes optimisation only: same network, 675,732 parameters, Table 2's complexity weights."""
     config = preset("predvla_cpu")
     assert count_parameters(get_policy_class(config.type)(config)) == PAPER_PARAMETERS["predvla"][0]
-    assert config.complexity_weights == (0.5, 0.2, 0.2, 0.1) and config.optimizer_lr == 1e-3
+    assert config.complexity_weights == (0.05, 0.02, 0.02, 0.01) and config.optimizer_lr == 1e-3
+    assert config.open_loop_weight == 1.0 and PredVLAConfig().open_loop_weight == 0.0
 
 
 @pytest.mark.parametrize("name", sorted(PAPER_PARAMETERS))

@@ -291,9 +291,10 @@ def test_the_libero_object_cpu_sweep_file_is_valid(tmp_path):
     assert sweep.settings.data["libero_object"].language_from == "libero"
     runner = Runner(sweep, tmp_path)
     train = runner.train_command(sweep.configs["predvla_cpu"], "libero_object", 0)
-    assert "--policy.complexity_weights=[0.5,0.2,0.2,0.1]" in train and "--policy.optimizer_lr=0.001" in train
-    table2 = runner.train_command(sweep.configs["predvla_cpu_table2_complexity"], "libero_object", 0)
-    assert "--policy.complexity_weights=[0.05,0.02,0.02,0.01]" in table2
+    assert "--policy.open_loop_weight=1.0" in train and "--policy.optimizer_lr=0.001" in train
+    assert "--steps=4000" in train and not any(a.startswith("--policy.complexity_weights") for a in train)
+    ablation = runner.train_command(sweep.configs["predvla_cpu_no_open_loop_term"], "libero_object", 0)
+    assert "--policy.open_loop_weight=0.0" in ablation
     assert "--policy.type=predvla_bc_rnn" in runner.train_command(sweep.configs["B2"], "libero_object", 0)
 
 
