@@ -7,7 +7,10 @@ Stages (each is skipped when its output already exists, so a killed run resumes)
 4. training with `lerobot-train --policy.type=predvla`,
 5. evaluation with `lerobot-eval --env.type=predvla_libero` from the official init states, once with
    error regression and once in exact open loop (`--policy.er_iterations=0`),
-6. a per-task success table, `results.json` and a bar plot.
+6. the same evaluation of the shipped libero_object suite checkpoint (`checkpoints/predvla_libero_object`, one
+   network for all ten tasks) on two tasks whose instructions ask for different objects: a blind replay of one
+   demonstration cannot succeed on both,
+7. per-task success tables, `results.json` and bar plots.
 """
 
 import argparse
@@ -26,6 +29,7 @@ from lerobot_predvla.utils.io import atomic_write_json
 BANNER = "=" * 78
 BIN = Path(sys.executable).parent
 MODES = {"error regression": 10, "open loop": 0}  # er_iterations
+SUITE_CHECKPOINT = Path("checkpoints/predvla_libero_object")  # trained on all ten libero_object tasks
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -46,6 +50,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--episodes", type=int, default=10, help="evaluation episodes per task and mode")
     p.add_argument("--eval-batch-size", type=int, default=10, help="parallel environments during evaluation")
     p.add_argument("--episode-length", type=int, default=None, help="step cap (paper: 600; default: suite cap)")
+    p.add_argument("--suite-checkpoint", default=str(SUITE_CHECKPOINT),
+                   help="suite checkpoint evaluated in stage 6 ('none' skips the stage)")
+    p.add_argument("--suite-tasks", type=task_ids, default=[0, 7], help="its tasks (default 0,7)")
+    p.add_argument("--suite-episodes", type=int, default=5, help="its evaluation episodes per task and mode")
     p.add_argument("--device", default="cpu",
                    help="torch device for lerobot-train and lerobot-eval (--policy.device), e.g. cuda; default cpu")
     p.set_defaults(func=run)
@@ -99,58 +107,88 @@ def run(args: argparse.Namespace) -> int:
 
     task_files = sorted((hdf5 / args.suite).glob("*_demo.hdf5"))
     if len(task_files) >= len(args.tasks):
-        _skip("1/6 demonstrations", hdf5 / args.suite)
+        _skip("1/7 demonstrations", hdf5 / args.suite)
     else:
-        _run("1/6 demonstrations", [*predvla, "demos", "--suite", args.suite, "--tasks", tasks,
+        _run("1/7 demonstrations", [*predvla, "demos", "--suite", args.suite, "--tasks", tasks,
                                     "--per-task", str(args.per_task), "--render-interval", "4", "--out", str(hdf5)])
     if frontend.exists():
-        _skip("2/6 front end", frontend)
+        _skip("2/7 front end", frontend)
     else:
-        _run("2/6 front end", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", args.suite,
+        _run("2/7 front end", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", args.suite,
                                "--vision-weights", args.vision_weights, "--frame-stride", "4",
                                "--out", str(frontend)])  # PCA on the rendered frames (every 4th)
     if dataset.exists():
-        _skip("3/6 conversion", dataset)
+        _skip("3/7 conversion", dataset)
     else:
-        _run("3/6 conversion", [*predvla, "convert", "--hdf5-root", str(hdf5), "--suite", args.suite,
+        _run("3/7 conversion", [*predvla, "convert", "--hdf5-root", str(hdf5), "--suite", args.suite,
                                 "--frontend", str(frontend), "--out", str(dataset),
                                 "--repo-id", "local/predvla_libero_demo"])
     if checkpoint.exists():
-        _skip("4/6 training", checkpoint)
+        _skip("4/7 training", checkpoint)
     else:
-        _run("4/6 training", [
+        _run("4/7 training", [
             str(BIN / "lerobot-train"), "--policy.type=predvla", "--dataset.repo_id=local/predvla_libero_demo",
             f"--dataset.root={dataset}", "--policy.push_to_hub=false", f"--policy.device={args.device}",
             "--num_workers=0", "--wandb.enable=false", f"--steps={args.steps}", f"--batch_size={args.batch_size}",
             f"--save_freq={args.steps}", "--log_freq=50", f"--policy.optimizer_lr={args.lr}",
             f"--output_dir={train}",
         ])
+    results = evaluate(args, "5/7 evaluation", checkpoint, args.tasks, args.episodes, out / "eval")
+    suite_results = None
+    if args.suite_checkpoint == "none":
+        print("\n[6/7 suite checkpoint] skipped (--suite-checkpoint none)")
+    elif not Path(args.suite_checkpoint, "config.json").is_file():
+        print(f"\n[6/7 suite checkpoint] {args.suite_checkpoint}/config.json not found: skipped (run from the "
+              "repository root, or pass --suite-checkpoint)")
+    else:
+        suite_results = evaluate(args, "6/7 suite checkpoint", Path(args.suite_checkpoint), args.suite_tasks,
+                                 args.suite_episodes, out / "suite_checkpoint_eval")
+    summary = {"suite": args.suite, "episodes_per_task": args.episodes, "per_task": results,
+               "mean": report("7/7 success of this training", args.suite, args.episodes, results)}
+    plot_success(results, args.suite, out / "success.png")
+    if suite_results is not None:
+        summary["suite_checkpoint"] = {
+            "path": args.suite_checkpoint, "episodes_per_task": args.suite_episodes, "per_task": suite_results,
+            "mean": report(f"7/7 success of the suite checkpoint {args.suite_checkpoint}", args.suite,
+                           args.suite_episodes, suite_results)}
+        plot_success(suite_results, f"{args.suite}, suite checkpoint", out / "success_suite_checkpoint.png")
+    atomic_write_json(out / "results.json", summary)
+    print(f"results: {out / 'results.json'}\nplots: {out / 'success.png'}"
+          + ("" if suite_results is None else f", {out / 'success_suite_checkpoint.png'}") + f"\n{BANNER}")
+    return 0
+
+
+def evaluate(args: argparse.Namespace, stage: str, checkpoint: Path, tasks: list[int], episodes: int,
+             prefix: Path) -> dict[str, dict[int, float]]:
+    """`lerobot-eval` with error regression and in exact open loop; per-task success rates per mode. Exact open
+    loop never reads an observation, so its cameras are rendered only at reset (same actions, physics-only cost)."""
     results: dict[str, dict[int, float]] = {}
+    task_list = ",".join(map(str, tasks))
     for mode, iterations in MODES.items():
-        eval_dir = out / f"eval_er{iterations}"
+        eval_dir = prefix.with_name(f"{prefix.name}_er{iterations}")
         info = eval_dir / EVAL_INFO_FILE
         if info.exists():
-            _skip(f"5/6 evaluation ({mode})", info)
+            _skip(f"{stage} ({mode})", info)
         else:
             cap = [] if args.episode_length is None else [f"--env.episode_length={args.episode_length}"]
-            _run(f"5/6 evaluation ({mode})", [
+            sparse = ["--env.render_interval=100000"] if iterations == 0 else []
+            _run(f"{stage} ({mode})", [
                 str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", f"--policy.er_iterations={iterations}",
                 f"--policy.device={args.device}", f"--env.type={EVAL_ENV_TYPE}", f"--env.task={args.suite}",
-                f"--env.task_ids=[{tasks}]", f"--eval.n_episodes={args.episodes}",
-                f"--eval.batch_size={min(args.eval_batch_size, args.episodes)}", "--eval.use_async_envs=false",
-                f"--output_dir={eval_dir}", *cap,
+                f"--env.task_ids=[{task_list}]", f"--eval.n_episodes={episodes}",
+                f"--eval.batch_size={min(args.eval_batch_size, episodes)}", "--eval.use_async_envs=false",
+                f"--output_dir={eval_dir}", *cap, *sparse,
             ])
         results[mode] = success_rates(info)
+    return results
 
-    print(f"\n{BANNER}\n6/6 success on {args.suite} ({args.episodes} episodes per task, official init states)")
+
+def report(title: str, suite: str, episodes: int, results: dict[str, dict[int, float]]) -> dict[str, float]:
+    """Print a per-task success table; return the mean per mode."""
+    print(f"\n{BANNER}\n{title} on {suite} ({episodes} episodes per task, official init states)")
     print(f"{'task':<8}" + "".join(f"{mode:>20}" for mode in results))
     for task in sorted(results["error regression"]):
         print(f"{task:<8}" + "".join(f"{results[mode][task]:>19.0f}%" for mode in results))
     means = {mode: sum(s.values()) / len(s) for mode, s in results.items()}
     print(f"{'mean':<8}" + "".join(f"{means[mode]:>19.1f}%" for mode in results))
-    summary = out / "results.json"
-    atomic_write_json(summary, {"suite": args.suite, "episodes_per_task": args.episodes, "per_task": results,
-                                "mean": means})
-    plot_success(results, args.suite, out / "success.png")
-    print(f"results: {summary}\nplot: {out / 'success.png'}\n{BANNER}")
-    return 0
+    return means
