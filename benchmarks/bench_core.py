@@ -21,9 +21,12 @@ from torch.utils._python_dispatch import TorchDispatchMode
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean, training_complexity
+from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
 from lerobot_predvla.policies.predvla.reference import reference_rollout
 
+STORE_EPISODES = (100, 10_000)  # x 200 steps: 10,000 episodes is 2 GB of posteriors, 6 GB with Adam's moments
+STORE_BATCH = 8
 MATMULS = {torch.ops.aten.mm.default, torch.ops.aten.addmm.default, torch.ops.aten.bmm.default,
            torch.ops.aten.mm.out, torch.ops.aten.addmm.out}
 
@@ -82,6 +85,27 @@ def train_step_fn(model: PredictiveModel, rollout: Callable, data: dict[str, Ten
         nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip_norm)
         network.step()
         posteriors.step()
+        return loss.item()
+
+    return step
+
+
+def store_step_fn(model: PredictiveModel, data: dict[str, Tensor], store: PosteriorStore) -> Callable[[], float]:
+    """`train_step_fn`'s step with the posteriors of random episodes gathered from, and stepped in, `store`
+    (posterior_store.py: row-wise Adam on the batch's episodes, as `PredVLAPolicy.update` does)."""
+    cfg = model.config
+    batch, num_episodes = data["c_q"].shape[1], store.num_episodes
+    network = torch.optim.Adam(model.parameters(), lr=cfg.optimizer_lr, weight_decay=cfg.optimizer_weight_decay)
+    g = torch.Generator().manual_seed(0)
+
+    def step() -> float:
+        network.zero_grad(set_to_none=True)
+        c_q = store.gather(torch.randint(num_episodes, (batch,), generator=g))
+        loss = training_loss(model, model.rollout, data, c_q)
+        loss.backward()
+        nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip_norm)
+        network.step()
+        store.step()
         return loss.item()
 
     return step
@@ -194,6 +218,10 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     record("er_ms_fast_b10", fast_control, reps_fast, warmup=2)
     replay, _ = floor_fn(fast_control)
     record("er_ms_floor_b10", replay, reps_fast)
+    store_data = training_data(config, STORE_BATCH, steps)
+    for episodes in STORE_EPISODES:  # per-step cost of the posterior store, small and LIBERO-90-sized datasets
+        store = PosteriorStore(episodes, steps, store_data["c_q"].shape[-1], lr=config.posterior_lr)
+        record(f"store_step_ms_{episodes}ep", store_step_fn(model, store_data, store), reps_fast)
     results["frontend_ms_b1"] = frontend_ms(reps_fast)
     # The front end runs on every 4th control step (fresh visual observation): amortised per control step.
     amortised = results["frontend_ms_b1"] / config.visual_refresh_interval
@@ -206,6 +234,7 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
         er_speedup_b1=results["er_ms_ref_b1"] / results["er_ms_fast_b1"],
         er_fast_over_floor_b1=results["er_ms_fast_b1"] / results["er_ms_floor_b1"],
         er_fast_over_floor_b10=results["er_ms_fast_b10"] / results["er_ms_floor_b10"],
+        store_10000_over_100=results["store_step_ms_10000ep"] / results["store_step_ms_100ep"],
     )
     print(f"PredVLA recurrent core, {threads} thread(s), medians over repeats (ms):")
     rows = [
@@ -223,6 +252,9 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     print(f"  front end b1 (2 cameras, 128 px, fp32): {results['frontend_ms_b1']:.1f} ms; "
           f"control step b1 with it amortised over {config.visual_refresh_interval} steps: "
           f"{results['control_ms_fast_b1']:.1f} ms")
+    print(f"  training step B={STORE_BATCH} T={steps} with a posterior store of 100 / 10,000 episodes: "
+          f"{results['store_step_ms_100ep']:.1f} / {results['store_step_ms_10000ep']:.1f} ms "
+          f"(ratio {results['store_10000_over_100']:.2f})")
     print("  all timings (ms): " + "; ".join(f"{k} " + ",".join(f"{v:.0f}" for v in vs) for k, vs in spread.items()))
     return results
 

@@ -56,6 +56,7 @@ def trained_policy(synthetic_dataset) -> PredVLAPolicy:
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
+        policy.update()  # the posteriors' row-wise Adam, as lerobot-train calls it
     return policy.eval()
 
 
@@ -239,6 +240,7 @@ def test_padded_and_non_refresh_steps_contribute_nothing(trained_policy):
     seq.vision[:, 4] += 1.0  # a fresh, valid step: now the loss must change
     assert not torch.equal(loss_and_grads()[0], reference[0])
     policy.sequences = saved
+    policy.posterior_store.discard_pending()  # gradients for inspection only: not a training step
     policy.eval()
 
 
@@ -270,14 +272,14 @@ def test_training_complexity_is_summed_over_each_sequence(trained_policy):
         PredVLAConfig(complexity_reduction="max")
 
 
-def test_posteriors_have_their_own_parameter_group(trained_policy):
+def test_the_optimizer_gets_the_network_and_update_steps_the_batch_posteriors(trained_policy):
     groups = trained_policy.get_optim_params()
-    assert len(groups) == 2
-    assert sum(p.numel() for p in groups[0]["params"]) == 675_732
-    assert groups[1]["params"][0] is trained_policy.posterior_store.latents
-    assert groups[1]["lr"] == 1e-2 and groups[1]["weight_decay"] == 0.0
-    assert trained_policy.posterior_store.latents.shape == (8, 32, 256)
-    assert trained_policy.posterior_store.latents.abs().sum() > 0  # trained
+    assert len(groups) == 1 and sum(p.numel() for p in groups[0]["params"]) == 675_732
+    store = trained_policy.posterior_store
+    assert store.latents.shape == (8, 32, 256) and store.lr == 1e-2
+    # Batches [0,1,5], [1,2,5], [2,3,5]: each row stepped once per batch it was in, the others never.
+    assert store.steps.tolist() == [1, 2, 2, 1, 0, 3, 0, 0]
+    assert store.latents[[0, 1, 2, 3, 5]].abs().sum() > 0 and store.latents[[4, 6, 7]].abs().sum() == 0
 
 
 def test_save_and_load_reproduce_actions(trained_policy, tmp_path):
@@ -292,23 +294,20 @@ def test_save_and_load_reproduce_actions(trained_policy, tmp_path):
     assert torch.equal(run(trained_policy, obs), run(loaded, obs))
 
 
-def test_lr_decay_option_decays_both_groups_along_a_cosine():
-    """`lr_decay_to` (a CPU-recipe option; Table 2 is constant): cosine from optimizer_lr to the value, the
-    posterior group scaled by the same factor."""
+def test_lr_decay_option_decays_the_network_rate_along_a_cosine():
+    """`lr_decay_to` (a CPU-recipe option; Table 2 is constant): cosine from optimizer_lr to the value; the
+    posteriors' rate (their own row-wise Adam) stays posterior_lr."""
     import torch
 
     config = PredVLAConfig(optimizer_lr=1e-3, lr_decay_to=1e-4)
-    network, posteriors = torch.nn.Parameter(torch.zeros(1)), torch.nn.Parameter(torch.zeros(1))
-    optimizer = torch.optim.Adam([{"params": [network]}, {"params": [posteriors], "lr": config.posterior_lr}],
-                                 lr=config.optimizer_lr)
+    optimizer = torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))], lr=config.optimizer_lr)
     scheduler = config.get_scheduler_preset().build(optimizer, num_training_steps=100)
     rates = []
     for _ in range(101):
-        rates.append([g["lr"] for g in optimizer.param_groups])
+        rates.append(optimizer.param_groups[0]["lr"])
         optimizer.step()
         scheduler.step()
-    assert rates[0] == pytest.approx([1e-3, 1e-2]) and rates[50] == pytest.approx([5.5e-4, 5.5e-3])
-    assert rates[100] == pytest.approx([1e-4, 1e-3])
+    assert rates[0] == pytest.approx(1e-3) and rates[50] == pytest.approx(5.5e-4) and rates[100] == pytest.approx(1e-4)
 
 
 def test_open_loop_term_trains_the_prior_chain_on_the_same_episodes(trained_policy):
@@ -342,14 +341,18 @@ def test_open_loop_term_trains_the_prior_chain_on_the_same_episodes(trained_poli
         extra = terms["open_loop_vision_error"] + terms["open_loop_proprio_error"] + terms["open_loop_action_nll"]
         assert loss.item() == pytest.approx(base.item() + 0.5 * extra, rel=1e-5)
         # The open-loop chain uses no posterior, so the posteriors' gradient is Eq. 10's alone.
-        post_grad = policy.posterior_store.latents.grad.clone()
+        [(_, rows)] = policy.posterior_store.pending_gradients()
+        post_grad = rows.grad.clone()
         cfg.open_loop_weight = 0.0
         policy.zero_grad()
+        policy.posterior_store.discard_pending()
         policy.forward({"episode_index": episodes})[0].backward()
-        assert torch.allclose(post_grad, policy.posterior_store.latents.grad, atol=1e-6)
+        [(_, rows)] = policy.posterior_store.pending_gradients()
+        assert torch.allclose(post_grad, rows.grad, atol=1e-6)
         assert policy.model.lang.weight.grad is not None
     finally:
         cfg.open_loop_weight = 0.0
+        policy.posterior_store.discard_pending()  # gradients for inspection only: not a training step
         policy.eval()
     with pytest.raises(ValueError, match="open_loop_weight"):
         PredVLAConfig(open_loop_weight=-1.0)

@@ -198,11 +198,15 @@ def train_step(policy, episodes: list[int]) -> None:
     loss.backward()
     torch.nn.utils.clip_grad_norm_(policy.parameters(), 1.0)
     optimizer.step()
+    policy.update()
     optimizer.zero_grad()
 
 
 def snapshot(policy) -> dict[str, torch.Tensor]:
-    return {n: p.detach().clone() for n, p in policy.named_parameters()}
+    """Weights, training posteriors, their Adam moments and step counts."""
+    store = policy.posterior_store.state() if policy.posterior_store is not None else {}
+    store = {f"posterior_store.{k}": v.clone() for k, v in store.items()}
+    return {**{n: p.detach().clone() for n, p in policy.named_parameters()}, **store}
 
 
 def unchanged(before: dict[str, torch.Tensor], after: dict[str, torch.Tensor]) -> bool:
@@ -247,6 +251,7 @@ def test_skip_leaves_every_weight_and_posterior_untouched(synthetic_dataset, fau
     after = snapshot(policy)
     assert unchanged(before, after)
     assert all(p.grad is None for p in policy.parameters())
+    assert policy.posterior_store.steps.sum() == 0  # no posterior row was stepped either
     assert policy.training_guard.skipped == 1
     assert any(f"non-finite {fault}" in r.getMessage() and "batch skipped (1 so far)" in r.getMessage()
                for r in caplog.records)

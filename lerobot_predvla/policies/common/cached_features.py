@@ -129,7 +129,7 @@ class CachedFeaturesConfig(PreTrainedConfig):
         return self.vision_dim_per_camera * self.num_cameras
 
     def get_optimizer_preset(self) -> AdamConfig:
-        # Adam with L2 weight decay (PredVLA's posterior group overrides both; see PredVLAPolicy.get_optim_params).
+        # Adam with L2 weight decay, network weights only (PredVLA's posteriors: posterior_store.py).
         return AdamConfig(
             lr=self.optimizer_lr, weight_decay=self.optimizer_weight_decay, grad_clip_norm=self.grad_clip_norm
         )

@@ -3,7 +3,7 @@
 LeRobot 0.6.1's `update_policy` owns the loop: forward, backward, gradient clipping, optimizer step, and a
 checkpoint every `--save_freq` steps. The policy sees two moments of it: the end of its own `forward`, where
 the loss is checked, and, through a hook on that loss, the end of the backward pass, where every gradient
-(network and training posteriors) is checked before the optimizer can use it.
+(network and the batch's training posteriors) is checked before the optimizer can use it.
 
 With `on_nonfinite_training="stop"` (default) the run stops there with one line naming the step and the loss
 terms, before a non-finite value reaches a weight, a posterior or a checkpoint. With "skip" the batch changes
@@ -13,6 +13,7 @@ parameters untouched (PyTorch optimizers skip parameters without gradients); the
 
 import logging
 import math
+from collections.abc import Callable
 
 import torch
 from torch import Tensor, nn
@@ -29,10 +30,13 @@ class TrainingGuard:
         module: The policy; its parameters that require gradients are checked.
         mode: `on_nonfinite_training`, "stop" or "skip".
         name: Policy name used in messages.
+        extra: Further (name, tensor) pairs whose `.grad` is checked and, when skipping, cleared alike
+            (PredVLA: the batch's training posteriors, which are not parameters).
     """
 
-    def __init__(self, module: nn.Module, mode: str, name: str):
-        self.module, self.mode, self.name = module, mode, name
+    def __init__(self, module: nn.Module, mode: str, name: str,
+                 extra: Callable[[], list[tuple[str, Tensor]]] | None = None):
+        self.module, self.mode, self.name, self.extra = module, mode, name, extra
         self.step = 0  # training forward passes in this process (lerobot-train's step, counted from its start)
         self.skipped = 0
         self._terms: dict[str, float] = {}
@@ -55,7 +59,8 @@ class TrainingGuard:
         return grad
 
     def _check_gradients(self) -> None:
-        named = [(n, p) for n, p in self.module.named_parameters() if p.grad is not None]
+        named = [*self.module.named_parameters(), *(self.extra() if self.extra is not None else [])]
+        named = [(n, p) for n, p in named if p.grad is not None]
         if not named:
             return
         sums = torch.stack([p.grad.sum() for _, p in named])  # a NaN or infinity anywhere makes its sum so

@@ -6,6 +6,7 @@ from lerobot.configs import PreTrainedConfig
 from lerobot.optim.schedulers import CosineDecayWithWarmupSchedulerConfig
 
 from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
+from lerobot_predvla.policies.predvla.posterior_store import MOMENT_DTYPES
 
 MODULE_NAMES = ("T", "V", "A_top", "A_bottom")
 SHORT_HORIZON_TAU = (16.0, 8.0, 5.0, 2.0)
@@ -44,11 +45,19 @@ class PredVLAConfig(CachedFeaturesConfig):
         bottleneck_dim: Width of the visual-to-action bottleneck W_VA (Eq. 5; Table 1: 256 -> 32 -> 256).
         tau: Time constants of (T, V, A_top, A_bottom) (Table 1 short horizon: (16, 8, 5, 2);
             long horizon: (30, 14, 8, 2)).
-        posterior_lr: Adam learning rate of the training posteriors c_q (Table 2: 1e-2).
+        posterior_lr: Adam learning rate of the training posteriors c_q (Table 2: 1e-2). Each demonstration's
+            posteriors are stepped by their own Adam when the demonstration is in the batch, after LeRobot's
+            optimizer step (`PredVLAPolicy.update`; `posterior_store.py` says why this is the paper's per-episode
+            reading). They are not parameters of LeRobot's optimizer, so `--optimizer.*` flags and gradient
+            clipping (`grad_clip_norm`) apply to the network only.
+        posterior_moments_dtype: Storage of the training posteriors' Adam moments: "float32" (default) or
+            "bfloat16", a third less memory for large datasets (LIBERO-90, 4,500 demonstrations x 500 steps:
+            4.6 GB instead of 6.9 GB; docs/speed.md). The update is computed in float32 and the posteriors stay
+            float32; the moments are rounded to ~3 significant digits when stored.
         lr_decay_to: None (default): constant learning rates (Table 2). A value: the network learning rate decays
-            along a cosine from `optimizer_lr` to this value over the run (`--steps`, at most `train_steps`),
-            and the posterior learning rate by the same factor (LeRobot's `cosine_decay_with_warmup`, no
-            warm-up). An option for experiments (docs/libero_object_cpu.md measures a cool-down with it).
+            along a cosine from `optimizer_lr` to this value over the run (`--steps`, at most `train_steps`;
+            LeRobot's `cosine_decay_with_warmup`, no warm-up); `posterior_lr` stays constant. An option for
+            experiments (docs/libero_object_cpu.md measures a cool-down with it).
         lambda_v: Weight of the visual prediction error (Eq. 10; Table 2: 1).
         lambda_q: Weight of the proprioceptive prediction error (Eq. 10; Table 2: 1).
         lambda_a: Weight of the action negative log-likelihood (Eq. 10; Table 2: 1).
@@ -104,6 +113,7 @@ class PredVLAConfig(CachedFeaturesConfig):
 
     # Training (Table 2).
     posterior_lr: float = 1e-2
+    posterior_moments_dtype: str = "float32"
     lr_decay_to: float | None = None
     lambda_v: float = 1.0
     lambda_q: float = 1.0
@@ -136,6 +146,10 @@ class PredVLAConfig(CachedFeaturesConfig):
         if self.complexity_reduction not in COMPLEXITY_REDUCTIONS:
             raise ValueError(
                 f"`complexity_reduction` must be one of {COMPLEXITY_REDUCTIONS}, got {self.complexity_reduction!r}."
+            )
+        if self.posterior_moments_dtype not in MOMENT_DTYPES:
+            raise ValueError(
+                f"`posterior_moments_dtype` must be one of {list(MOMENT_DTYPES)}, got {self.posterior_moments_dtype!r}."
             )
         if self.open_loop_weight < 0.0:
             raise ValueError(f"`open_loop_weight` must be >= 0, got {self.open_loop_weight}.")

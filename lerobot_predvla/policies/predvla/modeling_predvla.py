@@ -63,12 +63,21 @@ class PredVLAPolicy(PreTrainedPolicy):
         if dataset_meta is not None:
             use_dataset_frontend(config, Path(dataset_meta.root))
             self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
+            adam = config.get_optimizer_preset()
             self.posterior_store = PosteriorStore(
-                self.sequences.vision.shape[0], config.sequence_length, self.model.posterior_dim
+                self.sequences.vision.shape[0], config.sequence_length, self.model.posterior_dim,
+                lr=config.posterior_lr, betas=adam.betas, eps=adam.eps, moments_dtype=config.posterior_moments_dtype,
             )
+            # DDP must neither broadcast the store nor all-reduce it: `PosteriorStore.step` exchanges the batch's
+            # rows only (torch.nn.parallel.DistributedDataParallel reads this attribute of the wrapped module).
+            self._ddp_params_and_buffers_to_ignore = [f"posterior_store.{n}" for n, _ in
+                                                      self.posterior_store.named_buffers()]
         self._write_posteriors = True
         self.corruption = ObservationCorruption.from_config(config)  # Section 4.4; None unless configured
-        self.training_guard = TrainingGuard(self, config.on_nonfinite_training, self.name)
+        self.training_guard = TrainingGuard(
+            self, config.on_nonfinite_training, self.name,
+            extra=self.posterior_store.pending_gradients if self.posterior_store is not None else None,
+        )
         self.reset()
 
     # ----- parameters, saving, loading -------------------------------------------------------------
@@ -77,19 +86,18 @@ class PredVLAPolicy(PreTrainedPolicy):
         return list(self.model.parameters())
 
     def get_optim_params(self) -> list[dict]:
-        groups = [{"params": self.network_parameters()}]  # lr and weight decay from the optimizer preset
-        if self.posterior_store is not None:
-            groups.append(
-                {"params": [self.posterior_store.latents], "lr": self.config.posterior_lr, "weight_decay": 0.0}
-            )
-        return groups
+        """The network's weights; lr and weight decay from the optimizer preset. The training posteriors are
+        stepped by `update`, row by row (posterior_store.py)."""
+        return [{"params": self.network_parameters()}]
 
-    def state_dict(self, *args, **kwargs):
-        """The network only: posteriors live in their own file, never in `model.safetensors`."""
-        state = super().state_dict(*args, **kwargs)
-        for key in [k for k in state if k.startswith("posterior_store.")]:
-            del state[key]
-        return state
+    def update(self) -> None:
+        """Adam on the training posteriors of the batch just trained on (Section 3.4).
+
+        `lerobot-train` calls it after every optimizer step; a hand-written loop calls it after
+        `optimizer.step()` too. Gradients accumulated over several forward/backward passes are applied together.
+        """
+        if self.posterior_store is not None:
+            self.posterior_store.step()
 
     def _save_pretrained(self, save_directory: Path, state_dict: dict[str, Tensor] | None = None) -> None:
         super()._save_pretrained(save_directory, state_dict=state_dict)
@@ -144,20 +152,12 @@ class PredVLAPolicy(PreTrainedPolicy):
         state, _ = read_safetensors(model_file)
         check_tensors(model_file, state, {k: v.detach().cpu() for k, v in model.state_dict().items()})
         posteriors = None
-        if model.posterior_store is not None:  # resuming training: restore the posteriors too
+        if model.posterior_store is not None:  # resuming training: restore posteriors, moments and step counts
             posteriors = model.posterior_store.read(Path(model_file).parent)
         model.load_state_dict(state)
         if posteriors is not None:
             model.posterior_store.assign(posteriors)
         return model
-
-    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
-        """Strict on the network; the posteriors are optional since they never enter the weights file."""
-        missing, unexpected = super().load_state_dict(state_dict, strict=False, assign=assign)
-        missing = [k for k in missing if not k.startswith("posterior_store.")]
-        if strict and (missing or unexpected):
-            raise KeyError(f"PredVLA state dict: missing keys {missing}, unexpected keys {unexpected}.")
-        return torch.nn.modules.module._IncompatibleKeys(missing, unexpected)
 
     # ----- training ------------------------------------------------------------------------------------
     def forward(self, batch: dict[str, Tensor], reduction: str = "mean") -> tuple[Tensor, dict]:
