@@ -140,3 +140,17 @@ def test_report_command(runs, tmp_path, capsys):
     assert (tmp_path / "r" / "report.md").is_file()
     assert predvla_main(["report", str(tmp_path / "empty"), "--out", str(tmp_path / "r2")]) == 2
     assert "no run records" in capsys.readouterr().err
+
+
+def test_per_task_tables_figure_and_stage_times(report):
+    summary, out = report
+    text = (out / "report.md").read_text()
+    assert "## Per task: object" in text and FIGURES["tasks"] in summary["figures"].values()
+    assert (out / FIGURES["tasks"]).is_file()
+    row = next(line for line in text.split("## Per task: object")[1].splitlines() if line.startswith("| B2 |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    expected = [np.mean([100 * task_successes("B2", "libero_object", s, t) / 20 for s in SEEDS]) for t in range(4)]
+    assert [float(c) for c in cells[1:5]] == pytest.approx(expected, abs=0.006)
+    assert float(cells[5]) == pytest.approx(np.mean([rate("B2", "libero_object", s) for s in SEEDS]), abs=0.006)
+    stages = text.split("## Stages: wall time and commands")[1]
+    assert "| A4 | libero_goal | 1 |" in stages and "| A4 | libero_goal | 2 |" not in stages  # only what ran

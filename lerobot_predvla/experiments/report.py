@@ -12,6 +12,7 @@ means of the suite means and need every suite. Paired differences use the seeds 
 
 import json
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +28,7 @@ FIGURES = {
     "params": "params_vs_success.png",
     "pertask": "ablation_pertask.png",
     "corruption": "corruption.png",
+    "tasks": "success_per_task.png",
 }
 # Published LIBERO 4-suite means for context (trainable parameters, mean success %); not a controlled comparison.
 PUBLISHED_REFERENCES = (
@@ -490,6 +492,95 @@ def corruption_figure(summary: dict, path: Path) -> bool:
     return True
 
 
+def task_ids(results: Results, suite: str) -> list[str]:
+    return sorted({t for by_suite in results.tasks.values() for seeds in by_suite.get(suite, {}).values()
+                   for t in seeds}, key=int)
+
+
+def task_table(results: Results, suite: str) -> str | None:
+    """Success per task (mean over seeds, %) of every configuration evaluated on `suite`."""
+    names = [n for n in results.configs if results.tasks.get(n, {}).get(suite)]
+    ids = task_ids(results, suite)
+    if not names or len(ids) < 2:
+        return None
+    rows = []
+    for name in names:
+        seeds = results.tasks[name][suite]
+        rows.append([name, *[fmt_num(np.mean([seeds[s][t] for s in seeds if t in seeds[s]]))
+                             if any(t in seeds[s] for s in seeds) else MISSING for t in ids],
+                     fmt_num(np.mean([results.rates[name][suite][s] for s in seeds]))])
+    return _table(["Model", *[f"task {t}" for t in ids], "mean"], rows)
+
+
+def task_figure(results: Results, path: Path) -> bool:
+    """Per task of every multi-task suite: each configuration's success, side by side."""
+    import matplotlib.pyplot as plt
+
+    suites = [s for s in results.suites() if task_table(results, s) is not None]
+    if not suites:
+        return False
+    fig, axes = plt.subplots(len(suites), 1, figsize=(10, 3.6 * len(suites)), squeeze=False)
+    for ax, suite in zip(axes[:, 0], suites, strict=True):
+        names = [n for n in results.configs if results.tasks.get(n, {}).get(suite)]
+        ids = task_ids(results, suite)
+        width = 0.8 / len(names)
+        for i, name in enumerate(names):
+            seeds = results.tasks[name][suite]
+            values = [np.mean([seeds[s][t] for s in seeds if t in seeds[s]] or [np.nan]) for t in ids]
+            ax.bar(np.arange(len(ids)) + i * width, values, width, label=results.configs[name].get("label") or name)
+        ax.set_xticks(np.arange(len(ids)) + width * (len(names) - 1) / 2, ids)
+        ax.set_xlabel("task id")
+        ax.set_ylabel("success (%)")
+        ax.set_ylim(0, 100)
+        ax.set_title(SUITE_LABELS[suite])
+        ax.grid(axis="y", alpha=0.3)
+    axes[0][0].legend(fontsize=7, ncol=2)
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+def _relative(command: list[str]) -> str:
+    """A recorded command as a reader runs it from the repository root (no machine-specific prefixes)."""
+    prefixes = (f"{Path(sys.executable).parent}/", f"{Path.cwd()}/")
+    words = []
+    for word in command:
+        for prefix in prefixes:
+            word = word.replace(prefix, "")
+        words.append(f"'{word}'" if "[" in word else word)
+    return " ".join(words)
+
+
+def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
+    """Wall time of every recorded stage (data, training, evaluation) and the exact commands."""
+    lines = []
+    for path in sorted((Path(runs_dir) / "data").glob("*.json")):
+        stages = _load_json(path)
+        lines += [f"Data stages of {path.stem}:", "",
+                  _table(["stage", "wall time (min)", "command"],
+                         [[k, f"{v['wall_s'] / 60:.1f}", f"`{_relative(v['command'])}`"] for k, v in stages.items()]),
+                  ""]
+    rows, commands = [], []
+    for r in sorted(records, key=lambda r: (r["config"], r["suite"], int(r["seed"]))):
+        episodes = sum(t["episodes"] for t in r["tasks"].values())
+        train = r.get("train_wall_s")
+        rows.append([r["config"], r["suite"], str(r["seed"]), str(r.get("steps", MISSING)),
+                     f"{train / 60:.0f}" if train else MISSING,
+                     f"{r['eval_wall_s'] / 60:.0f}" if r.get("eval_wall_s") else MISSING, str(episodes)])
+        cmd = r.get("commands") or {}
+        if cmd.get("train") and not r.get("checkpoint_from"):
+            commands.append(f"- `{r['config']}` training: `{_relative(cmd['train'])}`")
+        if cmd.get("eval"):
+            commands.append(f"- `{r['config']}` evaluation, one task per call: `{_relative(cmd['eval'][0])}`")
+    if not rows:
+        return []
+    lines += [_table(["config", "suite", "seed", "training steps", "training (min)", "evaluation (min)",
+                      "episodes"], rows)]
+    if commands:
+        lines += ["", "Commands, as recorded (paths relative to the repository root):", "", *commands]
+    return lines
+
+
 # ----- report ----------------------------------------------------------------------------------------------
 def write_report(runs_dir: Path, out: Path) -> dict:
     """Build tables, figures, `report.md` and `report.json` in `out`; returns the summary."""
@@ -507,6 +598,7 @@ def write_report(runs_dir: Path, out: Path) -> dict:
         "params": params_figure(summary, out / FIGURES["params"]),
         "pertask": pertask_figure(results, out / FIGURES["pertask"]),
         "corruption": corruption_figure(summary, out / FIGURES["corruption"]),
+        "tasks": task_figure(results, out / FIGURES["tasks"]),
     }
     summary["figures"] = {k: FIGURES[k] for k, ok in made.items() if ok}
     missing = [f"{name}/{suite}/seed{seed}" for name, c in summary["configs"].items()
@@ -529,6 +621,9 @@ def write_report(runs_dir: Path, out: Path) -> dict:
          "Δ: mean paired difference from the intact model over the seeds both have (n)."),
         ("Corrupted observations", corruption_table(summary), "corruption",
          "α: fraction of observations replaced; bands ±1 seed standard deviation; dashed: open loop."),
+        *[(f"Per task: {SUITE_LABELS[suite]}", task_table(results, suite), "tasks" if i == 0 else None,
+           "Success per task (%), mean over seeds.") for i, suite in enumerate(
+              s for s in results.suites() if task_table(results, s) is not None)],
     ):
         has_figure = figure in summary["figures"]
         if table is None and not has_figure:
@@ -538,6 +633,9 @@ def write_report(runs_dir: Path, out: Path) -> dict:
             sections += ["", table]
         if has_figure:
             sections += ["", f"![{title}]({FIGURES[figure]})"]
+    stages = stages_section(records, runs_dir)
+    if stages:
+        sections += ["", "## Stages: wall time and commands", "", *stages]
     if missing:
         sections += ["", "## Missing runs", "", f"{len(missing)} planned runs have no record:", "",
                      *[f"- `{m}`" for m in missing]]
