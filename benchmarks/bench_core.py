@@ -70,38 +70,24 @@ def training_loss(model: PredictiveModel, rollout: Callable, data: dict[str, Ten
     )
 
 
-def train_step_fn(model: PredictiveModel, rollout: Callable, data: dict[str, Tensor]) -> Callable[[], float]:
-    """One optimisation step: forward, backward, gradient clip, network Adam and posterior Adam (Table 2)."""
+def train_step_fn(model: PredictiveModel, rollout: Callable, data: dict[str, Tensor],
+                  store: PosteriorStore | None = None) -> Callable[[], float]:
+    """One optimisation step as `lerobot-train` takes it: forward, backward, gradient clip, network Adam, then the
+    posteriors' row-wise Adam (`PredVLAPolicy.update`; Table 2). Without `store` the posteriors are the batch's
+    own (`data["c_q"]`, every row in every batch); with one, those of random episodes of it."""
     cfg = model.config
-    c_q = nn.Parameter(data["c_q"].clone())
-    network = torch.optim.Adam(model.parameters(), lr=cfg.optimizer_lr, weight_decay=cfg.optimizer_weight_decay)
-    posteriors = torch.optim.Adam([c_q], lr=cfg.posterior_lr)
-
-    def step() -> float:
-        network.zero_grad(set_to_none=True)
-        posteriors.zero_grad(set_to_none=True)
-        loss = training_loss(model, rollout, data, c_q)
-        loss.backward()
-        nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip_norm)
-        network.step()
-        posteriors.step()
-        return loss.item()
-
-    return step
-
-
-def store_step_fn(model: PredictiveModel, data: dict[str, Tensor], store: PosteriorStore) -> Callable[[], float]:
-    """`train_step_fn`'s step with the posteriors of random episodes gathered from, and stepped in, `store`
-    (posterior_store.py: row-wise Adam on the batch's episodes, as `PredVLAPolicy.update` does)."""
-    cfg = model.config
-    batch, num_episodes = data["c_q"].shape[1], store.num_episodes
-    network = torch.optim.Adam(model.parameters(), lr=cfg.optimizer_lr, weight_decay=cfg.optimizer_weight_decay)
+    steps, batch, dim = data["c_q"].shape
     g = torch.Generator().manual_seed(0)
+    if store is None:
+        store = PosteriorStore(batch, steps, dim, lr=cfg.posterior_lr)
+        store.latents.copy_(data["c_q"].transpose(0, 1))
+    whole_batch = store.num_episodes == batch
+    network = torch.optim.Adam(model.parameters(), lr=cfg.optimizer_lr, weight_decay=cfg.optimizer_weight_decay)
 
     def step() -> float:
         network.zero_grad(set_to_none=True)
-        c_q = store.gather(torch.randint(num_episodes, (batch,), generator=g))
-        loss = training_loss(model, model.rollout, data, c_q)
+        episodes = torch.arange(batch) if whole_batch else torch.randint(store.num_episodes, (batch,), generator=g)
+        loss = training_loss(model, rollout, data, store.gather(episodes))
         loss.backward()
         nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip_norm)
         network.step()
@@ -221,7 +207,7 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     store_data = training_data(config, STORE_BATCH, steps)
     for episodes in STORE_EPISODES:  # per-step cost of the posterior store, small and LIBERO-90-sized datasets
         store = PosteriorStore(episodes, steps, store_data["c_q"].shape[-1], lr=config.posterior_lr)
-        record(f"store_step_ms_{episodes}ep", store_step_fn(model, store_data, store), reps_fast)
+        record(f"store_step_ms_{episodes}ep", train_step_fn(model, model.rollout, store_data, store), reps_fast)
     results["frontend_ms_b1"] = frontend_ms(reps_fast)
     # The front end runs on every 4th control step (fresh visual observation): amortised per control step.
     amortised = results["frontend_ms_b1"] / config.visual_refresh_interval

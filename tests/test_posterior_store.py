@@ -126,13 +126,13 @@ def test_bfloat16_moments_save_a_third_of_the_memory_and_follow_float32():
 
 def test_the_bench_training_step_with_a_store_trains_the_batch_rows_only():
     """`predvla bench`'s store_step_ms_* step: network and the gathered rows are stepped, nothing else."""
-    from benchmarks.bench_core import randomised_model, store_step_fn, training_data
+    from benchmarks.bench_core import randomised_model, train_step_fn, training_data
     from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 
     model = randomised_model(PredVLAConfig(device="cpu"))
     data = training_data(model.config, 2, 6)
     s = PosteriorStore(50, 6, data["c_q"].shape[-1], lr=LR)
-    step = store_step_fn(model, data, s)
+    step = train_step_fn(model, model.rollout, data, s)
     losses = [step() for _ in range(3)]
     assert all(torch.isfinite(torch.tensor(losses)))
     assert s.steps.sum() <= 6 and (s.latents.abs().sum((1, 2)) > 0).sum() == (s.steps > 0).sum() > 0
