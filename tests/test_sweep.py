@@ -3,6 +3,7 @@ lerobot-train run through the runner; the posterior store under DistributedDataP
 
 import json
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -413,3 +414,45 @@ def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
     runner.execute = FakeData()
     assert runner.run(configs=["predvla"], progress=False)["done"] == ["predvla/libero_object/seed0"]
     assert all("lerobot_predvla.cli.main" not in c for c in runner.execute.commands)
+
+
+def test_evaluation_parts_run_in_parallel_workers_with_their_own_logs(tmp_path):
+    """`eval.workers: 2` runs two task parts at once (one lerobot-eval each, e.g. one per CPU core), each part
+    logging to its own file; the record is the same as one worker's, and a bad value is refused."""
+    import threading
+
+    class Concurrent(FakeLeRobot):
+        def __init__(self):
+            super().__init__()
+            self.running, self.most, self.lock, self.logs = 0, 0, threading.Lock(), []
+
+        def __call__(self, command: list[str], log: Path) -> int:
+            if not any(c.endswith("lerobot-eval") for c in command):
+                return super().__call__(command, log)
+            with self.lock:
+                self.running += 1
+                self.most = max(self.most, self.running)
+                self.logs.append(log.name)
+            time.sleep(0.05)
+            code = super().__call__(command, log)
+            with self.lock:
+                self.running -= 1
+            return code
+
+    records = {}
+    for workers in (1, 2):
+        (tmp_path / str(workers)).mkdir()
+        path = sweep_file(tmp_path / str(workers), seeds=[0], suites=["libero_object"],
+                          eval={"device": "cpu", "tasks": [0, 1, 2, 3], "n_episodes": 4, "workers": workers})
+        runner = Runner(Sweep.load(path), tmp_path / str(workers) / "runs", execute=Concurrent())
+        assert runner.run(configs=["predvla"], progress=False)["done"] == ["predvla/libero_object/seed0"]
+        record = json.loads(runner.record_path(Run("predvla", "libero_object", 0)).read_text())
+        records[workers] = record
+        assert runner.execute.most == workers
+        expected = {"seed0.eval.log"} if workers == 1 else {f"seed0.eval.task{t}.log" for t in range(4)}
+        assert set(runner.execute.logs) == expected
+    assert records[1]["tasks"] == records[2]["tasks"] and records[2]["eval_workers"] == 2
+    (tmp_path / "bad").mkdir()
+    bad = sweep_file(tmp_path / "bad", eval={"device": "cpu", "workers": 0})
+    with pytest.raises(SweepError, match="eval.workers must be >= 1"):
+        Sweep.load(bad)

@@ -35,6 +35,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--device", default=None, help="Device for training and evaluation (e.g. cpu, cuda).")
     parser.add_argument("--accelerate-processes", type=int, default=None,
                         help="Train each run with `accelerate launch --multi_gpu --num_processes=N`.")
+    parser.add_argument("--eval-workers", type=int, default=None,
+                        help="Task parts of an evaluation run at once, one lerobot-eval process each (with eval.tasks; "
+                             "e.g. 2 on a 2-core CPU, with OMP_NUM_THREADS=1).")
     parser.add_argument("--dry-run", action="store_true", help="Print this shard's commands and run nothing.")
     parser.set_defaults(func=run)
 
@@ -59,6 +62,7 @@ def apply_flags(sweep: Sweep, args: argparse.Namespace) -> None:
     if args.device:
         s.train_device = s.eval_device = args.device
     s.accelerate_processes = args.accelerate_processes or s.accelerate_processes
+    s.eval_workers = args.eval_workers or s.eval_workers
 
 
 def run(args: argparse.Namespace) -> int:

@@ -141,6 +141,7 @@ class Settings:
     env_type: str = EVAL_ENV_TYPE
     eval_args: list[str] = field(default_factory=list)
     eval_tasks: list[int] | None = None  # evaluate task by task: one lerobot-eval (and one resumable unit) per task
+    eval_workers: int = 1  # task parts evaluated at once, one lerobot-eval process each (one per CPU core)
     data: dict[str, "DataSpec"] = field(default_factory=dict)  # suite -> how its dataset is made
 
 
@@ -227,11 +228,14 @@ class Sweep:
                 env_type=str(evaluation.get("env_type", EVAL_ENV_TYPE)),
                 eval_args=list(evaluation.get("args", [])),
                 eval_tasks=[int(t) for t in evaluation["tasks"]] if "tasks" in evaluation else None,
+                eval_workers=int(evaluation.get("workers", 1)),
                 data={suite: DataSpec(**spec) for suite, spec in raw.get("data", {}).items()},
             )
             configs = [ConfigSpec(**entry) for entry in raw["configs"]]
         except TypeError as err:
             raise SweepError(f"{path}: {err}") from err
+        if settings.eval_workers < 1:
+            raise SweepError(f"{path}: eval.workers must be >= 1, got {settings.eval_workers}.")
         sweep = cls(settings, {}, path.parent)
         for spec in configs:
             if spec.name in sweep.configs:
@@ -629,24 +633,42 @@ class Runner:
         return [self.part_command(run, checkpoint, out, extra) for out, extra in self.eval_parts(run)
                 if not (out / EVAL_INFO_FILE).is_file()]
 
+    def evaluate_part(self, run: Run, command: list[str], out: Path, log: Path) -> bool:
+        """One part of an evaluation (the whole suite or one task), skipped when its `eval_info.json` exists; its
+        wall time is kept beside it."""
+        if (out / EVAL_INFO_FILE).is_file():
+            return True
+        shutil.rmtree(out, ignore_errors=True)  # a killed evaluation is redone from scratch
+        start = time.monotonic()
+        code = self.execute(command, log)
+        if code != 0 or not (out / EVAL_INFO_FILE).is_file():
+            print(f"predvla sweep: evaluation {run.key} ({out.name}) failed (exit {code}); see {log}", file=sys.stderr)
+            return False
+        atomic_write_json(out / EVAL_WALL_FILE, {"eval_wall_s": round(time.monotonic() - start, 1)})
+        return True
+
     def evaluate(self, run: Run, trained: dict) -> bool:
+        """Evaluate a run part by part, `eval_workers` parts at once (each with its own log when several run), and
+        write its record once every part has its `eval_info.json`."""
+        from concurrent.futures import ThreadPoolExecutor
+
         spec = self.sweep.configs[run.config]
-        tasks, commands, wall = {}, [], 0.0
-        for out, extra in self.eval_parts(run):
-            info = out / EVAL_INFO_FILE
-            command = self.part_command(run, self.trained_checkpoint(trained), out, extra)
-            commands.append(command)
-            start = time.monotonic()
-            if not info.is_file():
-                shutil.rmtree(out, ignore_errors=True)  # a killed evaluation is redone from scratch
-                code = self.execute(command, self.log_path(run.config, run.suite, run.seed, "eval"))
-                if code != 0 or not info.is_file():
-                    print(f"predvla sweep: evaluation {run.key} failed (exit {code}); see "
-                          f"{self.log_path(run.config, run.suite, run.seed, 'eval')}", file=sys.stderr)
-                    return False
-                atomic_write_json(out / EVAL_WALL_FILE, {"eval_wall_s": round(time.monotonic() - start, 1)})
+        parts = [(out, self.part_command(run, self.trained_checkpoint(trained), out, extra))
+                 for out, extra in self.eval_parts(run)]
+        workers = max(1, min(self.sweep.settings.eval_workers, len(parts)))
+        log = self.log_path(run.config, run.suite, run.seed, "eval")
+
+        def part_log(out: Path) -> Path:
+            return log if workers == 1 else log.with_name(f"{log.stem}.{out.name}.log")
+
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            finished = list(pool.map(lambda part: self.evaluate_part(run, part[1], part[0], part_log(part[0])), parts))
+        if not all(finished):
+            return False
+        tasks, commands, wall = {}, [command for _, command in parts], 0.0
+        for out, _ in parts:
             try:
-                tasks.update(parse_eval_info(info))
+                tasks.update(parse_eval_info(out / EVAL_INFO_FILE))
             except EvalInfoError as err:
                 raise SweepError(str(err)) from err
             wall_file = out / EVAL_WALL_FILE
@@ -675,7 +697,8 @@ class Runner:
             "n_episodes_per_task": spec.n_episodes or self.sweep.settings.n_episodes,
             "episode_length": self.sweep.settings.episode_length,
             "train_wall_s": trained["train_wall_s"],
-            "eval_wall_s": round(wall, 1),
+            "eval_wall_s": round(wall, 1),  # summed over the parts: with several workers, more than the elapsed time
+            "eval_workers": workers,
             "checkpoint": trained["checkpoint"],
             "commands": {"train": trained["command"], "eval": command},
             "versions": versions(),
