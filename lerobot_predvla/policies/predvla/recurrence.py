@@ -147,16 +147,19 @@ class _Recurrence(torch.autograd.Function):
         # step i - 1, from there: the gradients reaching d^l_{t-1} (the carry), d^T_t, z_t, a_{t-1}, q_{t-1} are
         # fixed column views of the two slots, so the loop splits nothing. Zeros: nothing reaches step T - 1.
         weights = [w.w_t, w.w_v, w.w_at, w.w_ab]
-        gin = [abuf.new_zeros((2, batch, x.shape[1])) for x in weights]
-        carry = [gin[m][..., :n] for m, n in enumerate(dims)]  # gradient reaching d^l_{t-1} from step t
-        gd_at = gin[A_BOTTOM][..., d_ab_:]
-        gd_t_at, gz = gin[A_TOP][..., d_at_:z_start], gin[A_TOP][..., z_start:]
-        gd_t_v = gin[V][..., d_v_ : d_v_ + d_t_]
+        slots = [abuf.new_zeros((2, batch, x.shape[1])) for x in weights]
+        gin = [x.unbind(0) for x in slots]
+        # Per slot, as (slot 0, slot 1) pairs of views.
+        carry = [slots[m][..., :n].unbind(0) for m, n in enumerate(dims)]  # gradient reaching d^l_{t-1} from step t
+        gd_at = slots[A_BOTTOM][..., d_ab_:].unbind(0)
+        gd_t_at, gz = slots[A_TOP][..., d_at_:z_start].unbind(0), slots[A_TOP][..., z_start:].unbind(0)
+        gd_t_v = slots[V][..., d_v_ : d_v_ + d_t_].unbind(0)
         if meta.efference:
-            carry_a, carry_q = gin[V][..., d_v_ + d_t_ : d_v_ + d_t_ + na], gin[V][..., d_v_ + d_t_ + na :]
+            carry_a, carry_q = slots[V][..., d_v_ + d_t_ : d_v_ + d_t_ + na], slots[V][..., d_v_ + d_t_ + na :]
         else:
             carry_a, carry_q = abuf.new_zeros((2, batch, na)), abuf.new_zeros((2, batch, nq))
-        carry_a3 = carry_a.unsqueeze(2)  # (2, batch, 1, a): broadcast over the mixture components
+        carry_a3 = carry_a.unsqueeze(2).unbind(0)  # (batch, 1, a): broadcast over the mixture components
+        carry_a, carry_q = carry_a.unbind(0), carry_q.unbind(0)
 
         def module(m: int, i: int, gd: Tensor) -> None:
             """Leaky-integrator backward (Eqs. 3-4) of module m at step i; its input gradient goes to slot i % 2."""
