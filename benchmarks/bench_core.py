@@ -2,7 +2,9 @@
 
 Training step (Eq. 10, forward + backward + gradient clip + both Adam optimizers) and one error-regression
 control step (Section 3.5: window W, n_itr iterations, full window). The floor replays, on random tensors of
-the same shapes and strides, exactly the matmuls the fast path issued, and nothing else.
+the same shapes and strides, exactly the matmuls the fast path issued, and nothing else. The training step is
+also timed as `lerobot-train` takes it (`bench_lerobot_train.py`), in alternation with the fast step at the same
+batch and sequence length.
 
     python -m benchmarks.bench_core --quick
 """
@@ -10,9 +12,11 @@ the same shapes and strides, exactly the matmuls the fast path issued, and nothi
 import argparse
 import json
 import statistics
+import tempfile
 import time
 from collections.abc import Callable
 from functools import partial
+from pathlib import Path
 
 import torch
 from torch import Tensor, nn
@@ -127,6 +131,36 @@ def median_ms(fn: Callable, repeats: int, warmup: int = 1) -> tuple[float, list[
     return statistics.median(times), times
 
 
+def interleaved_median_ms(fns: dict[str, Callable], repeats: int, warmup: int = 1) -> dict[str, tuple[float, list]]:
+    """Medians of functions timed in alternation, so that load from other work on shared cores weighs on each
+    alike; warm-up calls excluded."""
+    for fn in fns.values():
+        for _ in range(warmup):
+            fn()
+    times: dict[str, list[float]] = {key: [] for key in fns}
+    for _ in range(repeats):
+        for key, fn in fns.items():
+            start = time.perf_counter()
+            fn()
+            times[key].append((time.perf_counter() - start) * 1e3)
+    return {key: (statistics.median(t), t) for key, t in times.items()}
+
+
+def lerobot_train_comparison(model: PredictiveModel, data: dict[str, Tensor], repeats: int) -> dict:
+    """`lerobot-train`'s step (dataset batch, preprocessor, `update_policy`) and the fast step on the same batch
+    size, sequence length, network weights and number of episodes in the posterior store, in alternation."""
+    from benchmarks.bench_lerobot_train import lerobot_train_step_fn
+
+    steps, batch, dim = data["c_q"].shape
+    with tempfile.TemporaryDirectory() as tmp:
+        lerobot_step, policy = lerobot_train_step_fn(Path(tmp), batch, steps, weights=model)
+        store = PosteriorStore(policy.posterior_store.num_episodes, steps, dim, lr=model.config.posterior_lr)
+        fast_step = train_step_fn(model, model.rollout, data, store)
+        return interleaved_median_ms(
+            {"lerobot_train_step_ms": lerobot_step, "train_step_ms_fast_same_shape": fast_step}, repeats
+        )
+
+
 class MatmulRecorder(TorchDispatchMode):
     """Records the shapes and strides of every matmul issued while active."""
 
@@ -208,6 +242,8 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     for episodes in STORE_EPISODES:  # per-step cost of the posterior store, small and LIBERO-90-sized datasets
         store = PosteriorStore(episodes, steps, store_data["c_q"].shape[-1], lr=config.posterior_lr)
         record(f"store_step_ms_{episodes}ep", train_step_fn(model, model.rollout, store_data, store), reps_fast)
+    for key, (median, times) in lerobot_train_comparison(model, data, max(reps_fast, 5)).items():
+        results[key], spread[key] = median, times
     results["frontend_ms_b1"] = frontend_ms(reps_fast)
     # The front end runs on every 4th control step (fresh visual observation): amortised per control step.
     amortised = results["frontend_ms_b1"] / config.visual_refresh_interval
@@ -221,6 +257,7 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
         er_fast_over_floor_b1=results["er_ms_fast_b1"] / results["er_ms_floor_b1"],
         er_fast_over_floor_b10=results["er_ms_fast_b10"] / results["er_ms_floor_b10"],
         store_10000_over_100=results["store_step_ms_10000ep"] / results["store_step_ms_100ep"],
+        lerobot_train_over_fast=results["lerobot_train_step_ms"] / results["train_step_ms_fast_same_shape"],
     )
     print(f"PredVLA recurrent core, {threads} thread(s), medians over repeats (ms):")
     rows = [
@@ -241,6 +278,9 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     print(f"  training step B={STORE_BATCH} T={steps} with a posterior store of 100 / 10,000 episodes: "
           f"{results['store_step_ms_100ep']:.1f} / {results['store_step_ms_10000ep']:.1f} ms "
           f"(ratio {results['store_10000_over_100']:.2f})")
+    print(f"  lerobot-train step B={batch} T={steps} (dataset batch, preprocessor, update_policy) / fast step, "
+          f"timed in alternation: {results['lerobot_train_step_ms']:.1f} / "
+          f"{results['train_step_ms_fast_same_shape']:.1f} ms (ratio {results['lerobot_train_over_fast']:.2f})")
     print("  all timings (ms): " + "; ".join(f"{k} " + ",".join(f"{v:.0f}" for v in vs) for k, vs in spread.items()))
     return results
 

@@ -8,7 +8,7 @@ import torch
 
 from benchmarks.bench_core import control_stream, randomised_model, training_data, training_loss
 from lerobot_predvla import PredVLAConfig
-from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
+from lerobot_predvla.policies.predvla.error_regression import ErrorRegression, WindowAdam
 from lerobot_predvla.policies.predvla.reference import reference_rollout
 
 ABLATIONS = {
@@ -85,3 +85,17 @@ def test_error_regression_actions_match_reference(dtype, tolerance):
         er = ErrorRegression(model, rollout)
         actions.append(torch.stack([er(language.to(dtype), v.to(dtype), q.to(dtype)) for v, q in obs]))
     assert (actions[0] - actions[1]).abs().max() < tolerance
+
+
+def test_window_adam_is_torch_adam():
+    """Error regression's Adam on the window's posteriors takes exactly torch.optim.Adam's steps."""
+    g = torch.Generator().manual_seed(3)
+    ours = torch.randn(5, 2, 8, generator=g)
+    theirs = ours.clone().requires_grad_(True)
+    adam, reference = WindowAdam(ours, lr=0.05), torch.optim.Adam([theirs], lr=0.05)
+    for _ in range(4):
+        grad = torch.randn(ours.shape, generator=g)
+        adam.step(grad)
+        theirs.grad = grad.clone()
+        reference.step()
+        assert torch.equal(ours, theirs.detach())

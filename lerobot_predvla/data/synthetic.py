@@ -40,8 +40,9 @@ def make_synthetic_dataset(
     min_length: int = 40,
     max_length: int = 60,
     seed: int = 0,
+    progress: bool = True,
 ) -> LeRobotDataset:
-    """Write the dataset to `root` (replacing nothing: the directory must not exist)."""
+    """Write the dataset to `root` (replacing nothing: the directory must not exist); `progress` shows a bar."""
     root = Path(root)
     if root.exists():
         raise FileExistsError(f"{root} already exists; choose a new --out directory.")
@@ -54,7 +55,7 @@ def make_synthetic_dataset(
     shutil.rmtree(tmp, ignore_errors=True)
     dataset = LeRobotDataset.create(repo_id, FPS, synthetic_features(), root=tmp, use_videos=False)
     episodes = [(task, e) for e in range(episodes_per_task) for task in range(num_tasks)]
-    for task, _ in tqdm(episodes, desc="synthetic episodes"):
+    for task, _ in tqdm(episodes, desc="synthetic episodes", disable=not progress):
         length = int(rng.integers(min_length, max_length + 1))
         t = np.arange(length + 1)[:, None]
         phase, offset = rng.normal(0, 0.2, size=9), rng.normal(0, 0.1, size=9)

@@ -141,46 +141,56 @@ class _Recurrence(torch.autograd.Function):
         for m in range(4):
             if ext_h[m] is not None:
                 gh[m] = gh[m] + ext_h[m][-1]
-        carry = [abuf.new_zeros((batch, n)) for n in dims]  # gradient reaching d^l_{t-1} from step t
-        carry_a, carry_q = abuf.new_zeros((batch, na)), abuf.new_zeros((batch, nq))
         d_t_, d_v_, d_at_, d_ab_ = dims
         z_start = d_at_ + d_t_
-        split_ab = (d_ab_, d_at_)
-        split_at = (d_at_, d_t_, w.w_at.shape[1] - z_start) if w.w_va is not None else (d_at_, d_t_)
-        split_v = (d_v_, d_t_, na, nq) if meta.efference else (d_v_, d_t_)
+        # Input gradients of each module's matmul, written by step i into slot i % 2 and read, as the carry to
+        # step i - 1, from there: the gradients reaching d^l_{t-1} (the carry), d^T_t, z_t, a_{t-1}, q_{t-1} are
+        # fixed column views of the two slots, so the loop splits nothing. Zeros: nothing reaches step T - 1.
+        weights = [w.w_t, w.w_v, w.w_at, w.w_ab]
+        slots = [abuf.new_zeros((2, batch, x.shape[1])) for x in weights]
+        gin = [x.unbind(0) for x in slots]
+        # Per slot, as (slot 0, slot 1) pairs of views.
+        carry = [slots[m][..., :n].unbind(0) for m, n in enumerate(dims)]  # gradient reaching d^l_{t-1} from step t
+        gd_at = slots[A_BOTTOM][..., d_ab_:].unbind(0)
+        gd_t_at, gz = slots[A_TOP][..., d_at_:z_start].unbind(0), slots[A_TOP][..., z_start:].unbind(0)
+        gd_t_v = slots[V][..., d_v_ : d_v_ + d_t_].unbind(0)
+        if meta.efference:
+            carry_a, carry_q = slots[V][..., d_v_ + d_t_ : d_v_ + d_t_ + na], slots[V][..., d_v_ + d_t_ + na :]
+        else:
+            carry_a, carry_q = abuf.new_zeros((2, batch, na)), abuf.new_zeros((2, batch, nq))
+        carry_a3 = carry_a.unsqueeze(2).unbind(0)  # (batch, 1, a): broadcast over the mixture components
+        carry_a, carry_q = carry_a.unbind(0), carry_q.unbind(0)
 
-        def module(m: int, i: int, gd: Tensor, weight: Tensor) -> Tensor:
-            """Leaky-integrator backward (Eqs. 3-4) of module m at step i; returns the input gradient."""
+        def module(m: int, i: int, gd: Tensor) -> None:
+            """Leaky-integrator backward (Eqs. 3-4) of module m at step i; its input gradient goes to slot i % 2."""
             gh_i = torch.addcmul(gh[m], gd, dd[m][i])
             torch.mul(gh_i, dg[m][i], out=gx[m][i])
             # Carry to step i - 1: (1 - 1/tau) gh_i, plus that step's external term.
             no_ext = ext_h[m] is None or i == 0
             gh[m] = torch.mul(gh_i, decay[m]) if no_ext else torch.add(ext_h[m][i - 1], gh_i, alpha=decay[m])
-            return torch.mm(gx[m][i], weight)
+            torch.mm(gx[m][i], weights[m], out=gin[m][i & 1])
 
         for i in reversed(range(steps)):
+            now, c = i & 1, 1 - (i & 1)  # slot step i writes, slot holding step i + 1's input gradients
             # Heads: q_hat and the selected component's tanh mean (the argmax carries no gradient).
             if ext_q is None:
-                gout_q[i].copy_(carry_q)
+                gout_q[i].copy_(carry_q[c])
             else:
-                torch.add(carry_q, ext_q[i], out=gout_q[i])
-            ga = carry_a if ext_a is None else carry_a + ext_a[i]
-            if meta.efference or ext_a is not None:
-                torch.mul(da[i], ga.unsqueeze(1), out=gout_means[i])
+                torch.add(carry_q[c], ext_q[i], out=gout_q[i])
+            if ext_a is not None:
+                torch.mul(da[i], (carry_a[c] + ext_a[i]).unsqueeze(1), out=gout_means[i])
+            elif meta.efference:
+                torch.mul(da[i], carry_a3[c], out=gout_means[i])
             if ext_y1 is None:
                 torch.mm(gout_s[i], w.w2, out=gy1_s[i])
             else:
                 torch.addmm(ext_y1[i], gout_s[i], w.w2, out=gy1_s[i])
             gy1_s[i].mul_(relu_mask[i])
-            carry[A_BOTTOM], gd_at = module(A_BOTTOM, i, torch.addmm(carry[A_BOTTOM], gy1_s[i], w.w1), w.w_ab).split(
-                split_ab, 1
-            )
-            carry[A_TOP], gd_t, *gz = module(A_TOP, i, carry[A_TOP] + gd_at, w.w_at).split(split_at, 1)
-            gd_v = torch.addmm(carry[V], gz[0], w.w_va) if gz else carry[V]
-            carry[V], gd_t_v, *efference = module(V, i, gd_v, w.w_v).split(split_v, 1)
-            if efference:
-                carry_a, carry_q = efference
-            carry[T] = module(T, i, carry[T] + gd_t + gd_t_v, w.w_t)
+            module(A_BOTTOM, i, torch.addmm(carry[A_BOTTOM][c], gy1_s[i], w.w1))
+            module(A_TOP, i, carry[A_TOP][c] + gd_at[now])
+            module(V, i, torch.addmm(carry[V][c], gz[now], w.w_va) if ctx.has_va else carry[V][c])
+            module(T, i, torch.add(carry[T][c], gd_t_at[now]).add_(gd_t_v[now]))
+        carry, carry_a, carry_q = [x[0] for x in carry], carry_a[0], carry_q[0]  # step 0 wrote slot 0
 
         needs = ctx.needs_input_grad[1:]
         grad_w = [None] * len(w)
