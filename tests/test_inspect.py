@@ -31,6 +31,8 @@ def test_inspect_reports_every_checkpoint_and_draws_the_figures(trained, tmp_pat
         assert lang["open_loop_mse_own_task"][i] == row[i]
         assert lang["open_loop_mse_nearest_other_task"][i] == min(v for j, v in enumerate(row) if j != i)
     assert lang["language_swap_mse"][0][0] == 0.0 and lang["language_swap_mse"][0][1] > 0.0
+    # Each task's demonstrations spread around their mean (the synthetic episodes differ): a positive, finite floor.
+    assert len(lang["demo_spread_mse"]) == 2 and all(0.0 < s < 1e3 for s in lang["demo_spread_mse"])
     assert set(last["posteriors"]) == {"T", "V", "A_top", "A_bottom"}
     assert all(p["mean_norm"] > 0 for p in last["posteriors"].values())  # 4 steps of Adam moved them
     er = last["error_regression"]

@@ -100,11 +100,11 @@ def run(args: argparse.Namespace) -> int:
 def print_summary(report: dict) -> None:
     lang = report["language"]
     print(f"\nopen loop vs mean demonstrations (raw action MSE), {len(report['tasks'])} tasks:")
-    print(f"{'task':>4}  {'own':>8}  {'nearest other':>13}  name")
+    print(f"{'task':>4}  {'own':>8}  {'nearest other':>13}  {'demo spread':>11}  name (task index of the dataset)")
     for i, name in enumerate(report["tasks"]):
         other = lang["open_loop_mse_nearest_other_task"][i]
         print(f"{i:>4}  {lang['open_loop_mse_own_task'][i]:>8.4f}  {other if other is None else f'{other:>13.4f}'}"
-              f"  {name}")
+              f"  {lang['demo_spread_mse'][i]:>11.4f}  {name}")
     print(f"open loop closest to its own task's mean demonstration: {lang['open_loop_picks_own_task']:.0%}")
     print(f"language swap: actions move {lang['mean_language_swap_mse']:.4f} (mean demos differ by "
           f"{lang['mean_demo_gap']:.4f}); |W_lang l| {lang['language_drive_norm']:.3f}, "

@@ -96,6 +96,12 @@ def language_report(policy: PredVLAPolicy, data: TaskData) -> dict:
             for i in range(n)]
     demo_gap = [[action_mse(raw_means[i, :data.horizon(i)], raw_means[j, :data.horizon(i)]) for j in range(n)]
                 for i in range(n)]
+    # How far a task's own demonstrations lie from their mean: what no observation-blind chain can get below, and
+    # a measure of how much the task's actions depend on what the robot sees (e.g. aligning to an object's yaw).
+    spread = [float(np.mean([action_mse(data.raw(data.sequences.action[e, :min(int(data.sequences.length[e]),
+                                                                              data.horizon(i))]),
+                                        raw_means[i, :min(int(data.sequences.length[e]), data.horizon(i))])
+                             for e in data.episodes[i]])) for i in range(n)]
     identified = [int(np.argmin(row)) == i for i, row in enumerate(vs_demo)]
     drive = policy.model.language_term(language)  # W_lang l (Eq. 4)
     diffs = [float((drive[i] - drive[j]).norm()) for i in range(n) for j in range(i + 1, n)]
@@ -106,6 +112,7 @@ def language_report(policy: PredVLAPolicy, data: TaskData) -> dict:
         "open_loop_mse_nearest_other_task": [min(vs_demo[i][j] for j in range(n) if j != i) if n > 1 else None
                                              for i in range(n)],
         "open_loop_picks_own_task": sum(identified) / n,
+        "demo_spread_mse": spread,
         "open_loop_vs_mean_demos": vs_demo,
         "language_swap_mse": swap,
         "mean_demo_gap_mse": demo_gap,
