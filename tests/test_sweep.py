@@ -300,6 +300,10 @@ def test_the_libero_object_cpu_sweep_file_is_valid(tmp_path):
     train = runner.train_command(sweep.configs["predvla_cpu"], "libero_object", 0)
     assert "--policy.open_loop_weight=1.0" in train and "--policy.optimizer_lr=0.001" in train
     assert "--steps=4000" in train and not any(a.startswith("--policy.complexity_weights") for a in train)
+    # The shipped checkpoints/predvla_libero_object: the recipe trained 8,000 steps.
+    shipped = runner.train_command(sweep.configs["predvla_cpu_8k"], "libero_object", 0)
+    assert "--steps=8000" in shipped and "--policy.open_loop_weight=1.0" in shipped
+    assert sweep.configs["predvla_cpu_8k_open_loop"].checkpoint_from == "predvla_cpu_8k"
     ablation = runner.train_command(sweep.configs["predvla_cpu_no_open_loop_term"], "libero_object", 0)
     assert "--policy.open_loop_weight=0.0" in ablation
     assert "--policy.type=predvla_bc_rnn" in runner.train_command(sweep.configs["B2"], "libero_object", 0)
