@@ -98,10 +98,11 @@ def language_report(policy: PredVLAPolicy, data: TaskData) -> dict:
                 for i in range(n)]
     # How far a task's own demonstrations lie from their mean: what no observation-blind chain can get below, and
     # a measure of how much the task's actions depend on what the robot sees (e.g. aligning to an object's yaw).
-    spread = [float(np.mean([action_mse(data.raw(data.sequences.action[e, :min(int(data.sequences.length[e]),
-                                                                              data.horizon(i))]),
-                                        raw_means[i, :min(int(data.sequences.length[e]), data.horizon(i))])
-                             for e in data.episodes[i]])) for i in range(n)]
+    spread = []
+    for i in range(n):
+        steps = [min(int(data.sequences.length[e]), data.horizon(i)) for e in data.episodes[i]]
+        spread.append(float(np.mean([action_mse(data.raw(data.sequences.action[e, :k]), raw_means[i, :k])
+                                     for e, k in zip(data.episodes[i], steps, strict=True)])))
     identified = [int(np.argmin(row)) == i for i, row in enumerate(vs_demo)]
     drive = policy.model.language_term(language)  # W_lang l (Eq. 4)
     diffs = [float((drive[i] - drive[j]).norm()) for i in range(n) for j in range(i + 1, n)]
