@@ -292,6 +292,25 @@ def test_the_libero_demo_sweep_file_is_valid():
     assert sweep.settings.datasets["libero_object"]["root"].endswith("outputs/libero_demo/dataset")
 
 
+def test_randomised_resets_evaluate_from_their_own_seed_and_are_recorded(tmp_path):
+    configs = [{"name": "predvla", "group": "main"},
+               {"name": "fresh", "group": "ablation", "checkpoint_from": "predvla", "init_states": False,
+                "eval_seed": 1000}]
+    fake = FakeLeRobot()
+    runner = Runner(Sweep.load(sweep_file(tmp_path, configs=configs, seeds=[0], suites=["libero_object"])),
+                    tmp_path / "runs", execute=fake)
+    assert not runner.run(progress=False)["failed"]
+    evals = {arg(c, "output_dir").split("/eval/")[1].split("/")[0]: c for c in fake.commands
+             if c[0].endswith("lerobot-eval")}
+    assert arg(evals["predvla"], "env.init_states") == "true" and arg(evals["predvla"], "seed") == "0"
+    assert arg(evals["fresh"], "env.init_states") == "false" and arg(evals["fresh"], "seed") == "1000"
+    assert fake.count("lerobot-train") == 1  # the resets reuse the trained checkpoint
+    record = json.loads((tmp_path / "runs/records/fresh/libero_object/seed0.json").read_text())
+    assert record["init_states"] is False and record["eval_seed"] == 1000
+    base = json.loads((tmp_path / "runs/records/predvla/libero_object/seed0.json").read_text())
+    assert base["init_states"] is True and base["eval_seed"] == 0
+
+
 def test_the_libero_object_cpu_sweep_file_is_valid(tmp_path):
     sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "libero_object_cpu.yaml")
     assert sweep.settings.eval_tasks == list(range(10))
@@ -307,6 +326,8 @@ def test_the_libero_object_cpu_sweep_file_is_valid(tmp_path):
     ablation = runner.train_command(sweep.configs["predvla_cpu_no_open_loop_term"], "libero_object", 0)
     assert "--policy.open_loop_weight=0.0" in ablation
     assert "--policy.type=predvla_bc_rnn" in runner.train_command(sweep.configs["B2"], "libero_object", 0)
+    fresh = sweep.configs["predvla_cpu_8k_random_resets"]
+    assert fresh.checkpoint_from == "predvla_cpu_8k" and not fresh.init_states and fresh.eval_seed == 1000
 
 
 def test_paper_sweep_reads_every_policy_file():

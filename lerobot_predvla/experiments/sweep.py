@@ -84,6 +84,11 @@ class ConfigSpec:
             `source_suite` (whose dataset holds the unrelated episode; default: another suite, see
             `CORRUPTION_SOURCE`), `episode` (its episode index, default 0) and `open_loop` (the configuration whose
             success the report draws as the open-loop line). Becomes `--policy.er_corruption_*` at evaluation.
+        init_states: Evaluate from the benchmark's official init states (True, the default and the paper's protocol)
+            or from fresh randomised resets (False: `--env.init_states=false`, object placements sampled by the
+            simulator from `eval_seed`).
+        eval_seed: `lerobot-eval --seed` (default: the run's training seed). With `init_states: false` it picks the
+            resets, so a checkpoint can be evaluated on resets no training or earlier evaluation saw.
         suites, seeds, steps, n_episodes: Per-configuration replacements of the sweep-wide values.
     """
 
@@ -100,6 +105,8 @@ class ConfigSpec:
     compare_to: str | None = None
     branch: bool = False
     corruption: dict | None = None
+    init_states: bool = True
+    eval_seed: int | None = None
     suites: list[str] | None = None
     seeds: list[int] | None = None
     steps: int | None = None
@@ -438,11 +445,11 @@ class Runner:
             f"--env.type={s.env_type}",
             f"--env.task={run.suite}",
             f"--env.episode_length={s.episode_length}",
-            "--env.init_states=true",
+            f"--env.init_states={str(spec.init_states).lower()}",
             f"--eval.n_episodes={spec.n_episodes or s.n_episodes}",
             f"--eval.batch_size={s.eval_batch_size}",
             "--eval.use_async_envs=false",
-            f"--seed={run.seed}",
+            f"--seed={run.seed if spec.eval_seed is None else spec.eval_seed}",
             f"--output_dir={self.eval_dir(run)}",
             *s.eval_args,
             *spec.eval_args,
@@ -685,6 +692,8 @@ class Runner:
             "branch": spec.branch,
             "corruption": spec.corruption,
             "eval_overrides": spec.eval_overrides,
+            "init_states": spec.init_states,
+            "eval_seed": run.seed if spec.eval_seed is None else spec.eval_seed,
             "checkpoint_from": spec.checkpoint_from,
             "suite": run.suite,
             "seed": run.seed,
