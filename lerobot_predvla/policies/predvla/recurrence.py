@@ -95,6 +95,34 @@ def _forward(meta: Meta, p: list[Tensor], h: list[Tensor], d: list[Tensor], a: T
     return (dbuf, gbuf, inbuf, y1, out, abuf, torch.stack(index)), (h_t, h_v, h_at, h_ab)
 
 
+def weight_gradients(
+    needs: tuple[bool, ...], w: FusedWeights, gx: list[Tensor], dbuf: list[Tensor], inbuf: list[Tensor], y1: Tensor,
+    gy1: Tensor, gout: Tensor,
+) -> list[Tensor | None]:
+    """Each weight's gradient, where `needs` (one flag per `FusedWeights` field) asks for it, as one matmul over all
+    steps: the pre-activation gradients gx^l against the matmul inputs (D^T_{t-1}, IN^V, IN^At, IN^Ab), the
+    heads' output and hidden-layer gradients against their inputs."""
+    grad_w: list[Tensor | None] = [None] * len(w)
+    flat = [x.flatten(0, 1) for x in gx]
+    inputs = [dbuf[T][:-1], *inbuf]
+    for j, (m, key) in enumerate(((T, 0), (V, 1), (A_TOP, 2), (A_BOTTOM, 4))):
+        if needs[key]:
+            grad_w[key] = flat[m].t() @ inputs[j].flatten(0, 1)
+    if w.w_va is not None and needs[3]:
+        grad_z = flat[A_TOP] @ w.w_at[:, w.w_at.shape[1] - w.w_va.shape[0] :]
+        grad_w[3] = grad_z.t() @ dbuf[V][1:].flatten(0, 1)
+    gy1_flat, gout_flat = gy1.flatten(0, 1), gout.flatten(0, 1)
+    if needs[5]:
+        grad_w[5] = gy1_flat.t() @ dbuf[A_BOTTOM][1:].flatten(0, 1)
+    if needs[6]:
+        grad_w[6] = gy1_flat.sum(0)
+    if needs[7]:
+        grad_w[7] = gout_flat.t() @ y1.flatten(0, 1)
+    if needs[8]:
+        grad_w[8] = gout_flat.sum(0)
+    return grad_w
+
+
 class _Recurrence(torch.autograd.Function):
     @staticmethod
     def forward(ctx, meta: Meta, *args: Tensor):
@@ -192,25 +220,7 @@ class _Recurrence(torch.autograd.Function):
             module(T, i, torch.add(carry[T][c], gd_t_at[now]).add_(gd_t_v[now]))
         carry, carry_a, carry_q = [x[0] for x in carry], carry_a[0], carry_q[0]  # step 0 wrote slot 0
 
-        needs = ctx.needs_input_grad[1:]
-        grad_w = [None] * len(w)
-        flat = [x.flatten(0, 1) for x in gx_buf]
-        inputs = [dbuf[T][:-1], *inbuf[1:]]
-        for j, (m, key) in enumerate(((T, 0), (V, 1), (A_TOP, 2), (A_BOTTOM, 4))):
-            if needs[14 + key]:
-                grad_w[key] = flat[m].t() @ inputs[j].flatten(0, 1)
-        if ctx.has_va and needs[14 + 3]:
-            grad_z = flat[A_TOP] @ w.w_at[:, z_start:]
-            grad_w[3] = grad_z.t() @ dbuf[V][1:].flatten(0, 1)
-        gy1_flat, gout_flat = gy1.flatten(0, 1), gout.flatten(0, 1)
-        if needs[14 + 5]:
-            grad_w[5] = gy1_flat.t() @ dbuf[A_BOTTOM][1:].flatten(0, 1)
-        if needs[14 + 6]:
-            grad_w[6] = gy1_flat.sum(0)
-        if needs[14 + 7]:
-            grad_w[7] = gout_flat.t() @ y1.flatten(0, 1)
-        if needs[14 + 8]:
-            grad_w[8] = gout_flat.sum(0)
+        grad_w = weight_gradients(ctx.needs_input_grad[15:], w, gx_buf, dbuf, inbuf[1:], y1, gy1, gout)
         grad_a0, grad_q0 = (carry_a, carry_q) if meta.efference else (None, None)
         return (None, *gx_buf, *gh, *carry, grad_a0, grad_q0, *grad_w)
 
