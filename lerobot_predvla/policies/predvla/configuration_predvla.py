@@ -13,6 +13,7 @@ SHORT_HORIZON_TAU = (16.0, 8.0, 5.0, 2.0)
 LONG_HORIZON_TAU = (30.0, 14.0, 8.0, 2.0)
 LONG_HORIZON_SEQUENCE_LENGTH = 500
 CORRUPTION_CHANNELS = ("vision", "proprio")
+RECURRENCE_BACKENDS = ("python", "cpp")
 COMPLEXITY_REDUCTIONS = ("sum", "mean")  # training C of Eq. 10: summed over the sequence, or its mean
 PREDVLA_PAPER_PARAMETERS = 675_732  # Table 1, at the paper's LIBERO layout (2 cameras, proprio 9, action 7)
 
@@ -86,6 +87,13 @@ class PredVLAConfig(CachedFeaturesConfig):
         use_bottleneck: Keep the visual-to-action bottleneck V -> A_top (Eq. 5); False is ablation A2.
         use_efference_copy: Keep the efference copy A -> V of the model's own previous action and
             proprioception predictions (Eq. 6); False is ablation A3.
+        recurrence_backend: Implementation of the fused recurrence's per-step loops (forward and hand-written
+            BPTT; same results, `tests/test_recurrence_cpp.py`). "python" (default): ATen ops called from Python,
+            on any device and dtype, nothing to build. "cpp": the loops compiled in C++
+            (`recurrence_cpp.py`), CPU only, float32/float64; built with `torch.utils.cpp_extension.load_inline`
+            on first use (g++ and ninja needed, ~25-60 s once, then cached in torch's extension directory), a
+            clear error if that fails. Error regression at batch 1 is dispatch-bound and runs ~2x faster with
+            "cpp" (docs/speed.md); it stays opt-in so that nothing needs a compiler by default.
         er_corruption_channel: Observation channel corrupted before error regression (Section 4.4,
             "Sensitivity to corrupted observations"): "vision" or "proprio"; None (default) corrupts nothing.
             The other channel is left untouched.
@@ -110,6 +118,7 @@ class PredVLAConfig(CachedFeaturesConfig):
     tau: tuple[float, float, float, float] = SHORT_HORIZON_TAU
     use_bottleneck: bool = True
     use_efference_copy: bool = True
+    recurrence_backend: str = "python"
 
     # Training (Table 2).
     posterior_lr: float = 1e-2
@@ -146,6 +155,10 @@ class PredVLAConfig(CachedFeaturesConfig):
         if self.complexity_reduction not in COMPLEXITY_REDUCTIONS:
             raise ValueError(
                 f"`complexity_reduction` must be one of {COMPLEXITY_REDUCTIONS}, got {self.complexity_reduction!r}."
+            )
+        if self.recurrence_backend not in RECURRENCE_BACKENDS:
+            raise ValueError(
+                f"`recurrence_backend` must be one of {RECURRENCE_BACKENDS}, got {self.recurrence_backend!r}."
             )
         if self.posterior_moments_dtype not in MOMENT_DTYPES:
             raise ValueError(

@@ -12,6 +12,7 @@ import torch.nn.functional as F  # noqa: N812
 from torch import Tensor, nn
 from torch.distributions import Categorical, Independent, MixtureSameFamily, Normal
 
+from lerobot_predvla.policies.predvla import recurrence_cpp
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.recurrence import A_BOTTOM, A_TOP, FusedWeights, Meta, T, V, recurrence
 
@@ -232,7 +233,8 @@ class PredictiveModel(nn.Module):
 
         With `c_q=None` every posterior equals its prior, computed on the fly in module order (open loop);
         the length then comes from `extra_ab` or `steps`. `extra_ab` (time, batch, d_A_bottom) is added to
-        A_bottom's pre-activation at each step. Same equations as a loop over `step`, fused (`recurrence`).
+        A_bottom's pre-activation at each step. Same equations as a loop over `step`, fused (`recurrence`; its
+        loops in C++ with `config.recurrence_backend="cpp"`, `recurrence_cpp`).
         """
         length = next(x.shape[0] for x in (c_q, extra_ab) if x is not None) if steps is None else steps
         batch = state.h[T].shape[0]
@@ -247,7 +249,8 @@ class PredictiveModel(nn.Module):
             p[A_BOTTOM] = p[A_BOTTOM] + extra_ab
         cfg = self.config
         meta = Meta(self.alpha, cfg.use_efference_copy, cfg.num_mixtures, cfg.action_dim, cfg.proprio_dim)
-        d, q_hat, a_hat, hidden, h_final = recurrence(
+        run = recurrence_cpp.recurrence if cfg.recurrence_backend == "cpp" else recurrence
+        d, q_hat, a_hat, hidden, h_final = run(
             meta, p, state.h, state.d, state.a_hat, state.q_hat, self.fused_weights(c_q is None)
         )
         final = RecurrentState(h_final, tuple(x[-1] for x in d), a_hat[-1], q_hat[-1])

@@ -1,0 +1,136 @@
+"""The compiled recurrence (`recurrence_backend="cpp"`) against the Python fast path it replaces.
+
+The first test builds the C++ extension (~25-60 s once; cached in torch's extension directory afterwards).
+"""
+
+import dataclasses
+
+import pytest
+import torch
+
+from benchmarks.bench_core import (
+    control_step_fn,
+    control_stream,
+    randomised_model,
+    recorded_matmuls,
+    training_data,
+    training_loss,
+)
+from lerobot_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla import recurrence_cpp
+from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
+
+ABLATIONS = {
+    "full": {}, "A2 no bottleneck": {"use_bottleneck": False}, "A3 no efference": {"use_efference_copy": False},
+    "A2 + A3": {"use_bottleneck": False, "use_efference_copy": False},
+}
+
+
+def models(dtype: torch.dtype = torch.float32, **overrides) -> tuple:
+    """The same randomised network with the Python loops and with the compiled ones."""
+    config = PredVLAConfig(device="cpu", **overrides)
+    return tuple(randomised_model(dataclasses.replace(config, recurrence_backend=backend)).to(dtype)
+                 for backend in ("python", "cpp"))
+
+
+def test_backend_is_validated():
+    with pytest.raises(ValueError, match="recurrence_backend"):
+        PredVLAConfig(device="cpu", recurrence_backend="cuda")
+
+
+@pytest.mark.parametrize("overrides", ABLATIONS.values(), ids=ABLATIONS.keys())
+@pytest.mark.parametrize("with_posteriors", [True, False], ids=["c_q", "priors on the fly"])
+def test_every_output_and_gradient_matches_python_in_float64(overrides, with_posteriors):
+    """Outputs, then gradients of a random projection of all of them with respect to every parameter, the
+    posteriors and an extra A_bottom input: the compiled loops agree with the Python loops to 1e-10."""
+    batch, steps = 3, 9
+    results = []
+    for model in models(torch.float64, **overrides):
+        g = torch.Generator().manual_seed(1)
+        language = torch.randn(batch, 64, generator=g, dtype=torch.float64)
+        c_q = (0.3 * torch.randn(steps, batch, 256, generator=g, dtype=torch.float64)).requires_grad_(with_posteriors)
+        extra_ab = torch.randn(steps, batch, 256, generator=g, dtype=torch.float64, requires_grad=True)
+        traj = model.rollout(model.initial_state(batch), model.language_term(language),
+                             c_q if with_posteriors else None, extra_ab=extra_ab)
+        outputs = [*traj.d, traj.d_prev_top, traj.q_hat, traj.a_hat, *traj.action_params, *traj.final.h]
+        weights = torch.Generator().manual_seed(2)
+        scalar = sum((x * torch.randn(x.shape, generator=weights, dtype=x.dtype)).sum() for x in outputs)
+        inputs = [*model.parameters(), extra_ab] + ([c_q] if with_posteriors else [])
+        grads = torch.autograd.grad(scalar, inputs, allow_unused=True)
+        results.append([*outputs, *(torch.zeros(()) if x is None else x for x in grads)])
+    for cpp, python in zip(results[1], results[0], strict=True):
+        torch.testing.assert_close(cpp, python, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("overrides", ABLATIONS.values(), ids=ABLATIONS.keys())
+def test_training_loss_and_gradients_match_python_in_float32(overrides):
+    results = []
+    pair = models(**overrides)
+    for model in pair:
+        data = training_data(model.config, batch=3, steps=24)
+        c_q = data["c_q"].clone().requires_grad_(True)
+        loss = training_loss(model, model.rollout, data, c_q)
+        results.append((loss, torch.autograd.grad(loss, [*model.parameters(), c_q])))
+    (loss, grads), (cpp_loss, cpp_grads) = results
+    assert abs(loss.item() - cpp_loss.item()) < 1e-5
+    names = [name for name, _ in pair[0].named_parameters()] + ["posteriors"]
+    for name, g, cpp in zip(names, grads, cpp_grads, strict=True):
+        assert (g - cpp).abs().max() < 1e-5, name
+
+
+@pytest.mark.parametrize("overrides", ABLATIONS.values(), ids=ABLATIONS.keys())
+@pytest.mark.parametrize("dtype, tolerance", [(torch.float64, 1e-10), (torch.float32, 1e-5)])
+def test_error_regression_actions_match_python(overrides, dtype, tolerance):
+    """Sliding window included in float64; fp32 at the first control step only (Adam amplifies summation-order
+    rounding, see tests/test_fast_path.py)."""
+    steps = 6 if dtype == torch.float64 else 1
+    actions = []
+    for model in models(dtype, er_window=4, er_iterations=3, **overrides):
+        language, obs = control_stream(model.config, batch=2, steps=steps)
+        er = ErrorRegression(model)
+        actions.append(torch.stack([er(language.to(dtype), v.to(dtype), q.to(dtype)) for v, q in obs]))
+    assert (actions[0] - actions[1]).abs().max() < tolerance
+
+
+@pytest.mark.parametrize("batch", [1, 4])
+def test_same_matmuls_as_python(batch):
+    """An error-regression control step issues the same matmuls on the same shapes and strides with either
+    backend, so the benchmark's floor (which replays them) is the floor of both."""
+    python, cpp = models(er_window=5, er_iterations=2)
+    assert recorded_matmuls(control_step_fn(cpp, cpp.rollout, batch)) == recorded_matmuls(
+        control_step_fn(python, python.rollout, batch)
+    )
+
+
+def test_other_devices_and_dtypes_are_refused():
+    _, cpp = models()
+    cpp = cpp.to(torch.bfloat16)
+    with pytest.raises(ValueError, match="recurrence_backend='python'"):
+        cpp.rollout(cpp.initial_state(1), cpp.language_term(torch.zeros(1, 64, dtype=torch.bfloat16)), steps=2)
+
+
+def test_build_failure_names_the_flag(monkeypatch):
+    def no_compiler(**kwargs):
+        raise OSError("g++: not found")
+
+    monkeypatch.setattr(torch.utils.cpp_extension, "load_inline", no_compiler)
+    recurrence_cpp.extension.cache_clear()
+    try:
+        with pytest.raises(RuntimeError, match="recurrence_backend='cpp'.*g\\+\\+: not found"):
+            recurrence_cpp.extension()
+    finally:
+        recurrence_cpp.extension.cache_clear()
+
+
+def test_non_finite_values_propagate_as_in_python():
+    """A non-finite posterior spreads through the states and actions as in the Python loops: error regression
+    detects diverged environments by it (`ErrorRegression.infer`)."""
+    outputs = []
+    for model in models():
+        c_q = 0.3 * torch.randn(6, 2, 256, generator=torch.Generator().manual_seed(4))
+        c_q[2, 0, 5] = float("nan")
+        traj = model.rollout(model.initial_state(2), model.language_term(torch.zeros(2, 64)), c_q)
+        outputs.append([*traj.d, traj.q_hat, traj.a_hat])
+    for python, cpp in zip(*outputs, strict=True):
+        assert not python[:, 0].isfinite().all() and python[:, 1].isfinite().all()
+        torch.testing.assert_close(cpp, python, rtol=0, atol=1e-5, equal_nan=True)
