@@ -2,7 +2,10 @@
 
 Training step (Eq. 10, forward + backward + gradient clip + both Adam optimizers) and one error-regression
 control step (Section 3.5: window W, n_itr iterations, full window). The floor replays, on random tensors of
-the same shapes and strides, exactly the matmuls the fast path issued, and nothing else. The training step is
+the same shapes and strides, exactly the matmuls the fast path issued, and nothing else. Error regression is
+timed with the fast path's Python loops (`er_ms_fast_*`, the default backend) and with its compiled loops
+(`er_ms_cpp_*`, `recurrence_backend="cpp"`, built on first use), in alternation with their common floor (the
+two issue the same matmuls; checked). The training step is
 also timed as `lerobot-train` takes it (`bench_lerobot_train.py`), in alternation with the fast step at the same
 batch and sequence length.
 
@@ -10,6 +13,7 @@ batch and sequence length.
 """
 
 import argparse
+import dataclasses
 import json
 import statistics
 import tempfile
@@ -175,11 +179,17 @@ class MatmulRecorder(TorchDispatchMode):
         return func(*args, **(kwargs or {}))
 
 
-def floor_fn(fn: Callable) -> tuple[Callable[[], None], int]:
-    """A function issuing the same matmuls as one call of `fn`, on random operands, and nothing else."""
+def recorded_matmuls(fn: Callable) -> list[tuple]:
+    """The matmuls (op, operand shapes and strides) one call of `fn` issues, in order."""
     recorder = MatmulRecorder()
     with recorder:
         fn()
+    return recorder.calls
+
+
+def floor_fn(fn: Callable) -> tuple[Callable[[], None], int]:
+    """A function issuing the same matmuls as one call of `fn`, on random operands, and nothing else."""
+    recorded = recorded_matmuls(fn)
     operands: dict = {}
 
     def tensor(shape: torch.Size, stride: tuple[int, ...]) -> Tensor:
@@ -188,7 +198,7 @@ def floor_fn(fn: Callable) -> tuple[Callable[[], None], int]:
             operands[key] = torch.empty_strided(shape, stride).normal_()
         return operands[key]
 
-    calls = [(op, [tensor(*spec) for spec in specs]) for op, specs in recorder.calls]
+    calls = [(op, [tensor(*spec) for spec in specs]) for op, specs in recorded]
 
     def replay() -> None:
         for op, args in calls:
@@ -230,14 +240,17 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     replay, results["train_matmuls"] = floor_fn(fast_step)
     record("train_step_ms_floor", replay, reps_fast)
     record("er_ms_ref_b1", control_step_fn(model, ref, 1), reps_ref)
-    fast_control = control_step_fn(model, fast, 1)
-    record("er_ms_fast_b1", fast_control, reps_fast, warmup=2)
-    replay, results["er_matmuls_b1"] = floor_fn(fast_control)
-    record("er_ms_floor_b1", replay, reps_fast)
-    fast_control = control_step_fn(model, fast, 10)
-    record("er_ms_fast_b10", fast_control, reps_fast, warmup=2)
-    replay, _ = floor_fn(fast_control)
-    record("er_ms_floor_b10", replay, reps_fast)
+    # Error regression with the Python loops (the default) and the compiled ones (`recurrence_backend="cpp"`, same
+    # weights), timed in alternation with their floor: both issue the same matmuls on the same operands (checked).
+    cpp_model = randomised_model(dataclasses.replace(config, recurrence_backend="cpp"))
+    for b in (1, 10):
+        fast_control, cpp_control = control_step_fn(model, fast, b), control_step_fn(cpp_model, cpp_model.rollout, b)
+        replay, results[f"er_matmuls_b{b}"] = floor_fn(fast_control)
+        if recorded_matmuls(cpp_control) != recorded_matmuls(fast_control):
+            raise RuntimeError("the compiled recurrence issues other matmuls than the Python one: no common floor")
+        timed = {f"er_ms_fast_b{b}": fast_control, f"er_ms_cpp_b{b}": cpp_control, f"er_ms_floor_b{b}": replay}
+        for key, (median, times) in interleaved_median_ms(timed, reps_fast, warmup=2).items():
+            results[key], spread[key] = median, times
     store_data = training_data(config, STORE_BATCH, steps)
     for episodes in STORE_EPISODES:  # per-step cost of the posterior store, small and LIBERO-90-sized datasets
         store = PosteriorStore(episodes, steps, store_data["c_q"].shape[-1], lr=config.posterior_lr)
@@ -256,6 +269,8 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
         er_speedup_b1=results["er_ms_ref_b1"] / results["er_ms_fast_b1"],
         er_fast_over_floor_b1=results["er_ms_fast_b1"] / results["er_ms_floor_b1"],
         er_fast_over_floor_b10=results["er_ms_fast_b10"] / results["er_ms_floor_b10"],
+        er_cpp_over_floor_b1=results["er_ms_cpp_b1"] / results["er_ms_floor_b1"],
+        er_cpp_over_floor_b10=results["er_ms_cpp_b10"] / results["er_ms_floor_b10"],
         store_10000_over_100=results["store_step_ms_10000ep"] / results["store_step_ms_100ep"],
         lerobot_train_over_fast=results["lerobot_train_step_ms"] / results["train_step_ms_fast_same_shape"],
     )
@@ -272,6 +287,9 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
         cells = [f"{x:10.1f}" if x is not None else f"{'-':>10s}" for x in (r, f, fl)]
         ratio = f"{r / f:9.2f}" if r is not None else f"{'-':>9s}"
         print(f"  {label:44s} {' '.join(cells)} {ratio} {f / fl:10.2f}")
+    print(f"  error regression with the compiled loops (recurrence_backend='cpp'), b1 / b10: "
+          f"{results['er_ms_cpp_b1']:.1f} / {results['er_ms_cpp_b10']:.1f} ms, over the floor "
+          f"{results['er_cpp_over_floor_b1']:.2f} / {results['er_cpp_over_floor_b10']:.2f}")
     print(f"  front end b1 (2 cameras, 128 px, fp32): {results['frontend_ms_b1']:.1f} ms; "
           f"control step b1 with it amortised over {config.visual_refresh_interval} steps: "
           f"{results['control_ms_fast_b1']:.1f} ms")
