@@ -89,11 +89,12 @@ class PredVLAConfig(CachedFeaturesConfig):
             proprioception predictions (Eq. 6); False is ablation A3.
         recurrence_backend: Implementation of the fused recurrence's per-step loops (forward and hand-written
             BPTT; same results, `tests/test_recurrence_cpp.py`). "python" (default): ATen ops called from Python,
-            on any device and dtype, nothing to build. "cpp": the loops compiled in C++
-            (`recurrence_cpp.py`), CPU only, float32/float64; built with `torch.utils.cpp_extension.load_inline`
-            on first use (g++ and ninja needed, ~25-60 s once, then cached in torch's extension directory), a
-            clear error if that fails. Error regression at batch 1 is dispatch-bound and runs ~2x faster with
-            "cpp" (docs/speed.md); it stays opt-in so that nothing needs a compiler by default.
+            on any device and dtype, nothing to build. "cpp": the loops compiled in C++ (`recurrence_cpp.py`),
+            CPU only, float32/float64; built with `torch.utils.cpp_extension.load_inline` on first use (g++ and
+            ninja needed, 24-28 s once on 2 shared cores, then loaded from torch's extension directory), with an
+            error naming this flag if that fails. Error regression on CPU is dispatch-bound at batch 1 and runs
+            ~1.6x faster with "cpp" (1.3x its matmul floor instead of 2.1x; docs/speed.md). "python" stays the
+            default so that nothing needs a compiler; pass `--policy.recurrence_backend=cpp` for CPU evaluation.
         er_corruption_channel: Observation channel corrupted before error regression (Section 4.4,
             "Sensitivity to corrupted observations"): "vision" or "proprio"; None (default) corrupts nothing.
             The other channel is left untouched.

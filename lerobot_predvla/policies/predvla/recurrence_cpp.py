@@ -7,10 +7,10 @@ concatenations, ReLU, the GMM mode, the BPTT's elementwise products) runs as one
 instead of ~21 dispatched ATen ops. At batch 1 error regression is dominated by those dispatches (docs/speed.md).
 The weight gradients after the loop are the Python path's (`recurrence.weight_gradients`).
 
-The extension is compiled with `torch.utils.cpp_extension.load_inline` on first use (g++ and ninja needed; cached in
-torch's extension directory, ~25 s the first time) and logged once. It runs on CPU tensors in float32 or float64.
-tanh uses glibc's vector kernels (libmvec, AVX2, <= 4 ulp) where the CPU and C library have them, else std::tanh;
-the log line names which.
+The extension is compiled with `torch.utils.cpp_extension.load_inline` on first use (g++ and ninja needed; 24-28 s on
+2 shared cores, then loaded from torch's extension directory) and logged once. It runs on CPU tensors in float32 or
+float64. tanh uses glibc's vector kernels (libmvec, AVX2, <= 4 ulp) where the CPU and C library have them, else
+std::tanh; the log line names which.
 """
 
 import logging
