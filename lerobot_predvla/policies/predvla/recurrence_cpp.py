@@ -14,6 +14,8 @@ std::tanh; the log line names which.
 """
 
 import logging
+import os
+import sys
 import time
 from functools import cache
 from types import ModuleType
@@ -391,6 +393,11 @@ def extension() -> ModuleType:
     """Builds (first call in a fresh extension directory) or loads the compiled loops; logged once."""
     from torch.utils.cpp_extension import load_inline
 
+    # torch runs `ninja` from PATH; pip's ninja (the `test` extra) sits beside this interpreter, which an unactivated
+    # virtual environment leaves off PATH.
+    here = os.path.dirname(sys.executable)
+    if here not in os.environ.get("PATH", "").split(os.pathsep):
+        os.environ["PATH"] = os.pathsep.join(filter(None, (here, os.environ.get("PATH"))))
     start = time.perf_counter()
     try:
         module = load_inline(
@@ -400,7 +407,8 @@ def extension() -> ModuleType:
     except Exception as error:  # the compiler's, ninja's or the loader's error, whichever failed
         raise RuntimeError(
             "PredVLAConfig.recurrence_backend='cpp' needs the C++ recurrence built with "
-            "torch.utils.cpp_extension.load_inline, which needs a C++ compiler (g++) and ninja; it failed: "
+            "torch.utils.cpp_extension.load_inline, which needs a C++ compiler (g++) and ninja "
+            "(`pip install ninja`); it failed: "
             f"{error}. Install them or use recurrence_backend='python' (same results)."
         ) from error
     logging.info(
