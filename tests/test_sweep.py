@@ -330,6 +330,19 @@ def test_the_libero_object_cpu_sweep_file_is_valid(tmp_path):
     assert fresh.checkpoint_from == "predvla_cpu_8k" and not fresh.init_states and fresh.eval_seed == 1000
 
 
+def test_the_init_noise_sweep_records_demonstrations_that_start_like_the_official_init_states(tmp_path):
+    """The arm's initial joint noise reaches `predvla demos`; libero_object_cpu.yaml keeps the fixed start."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    for name, noise in (("libero_object_cpu_init_noise.yaml", "0.02"), ("libero_object_cpu.yaml", "0.0")):
+        sweep = Sweep.load(sweeps / name)
+        demos = Runner(sweep, tmp_path).data_commands("libero_object")
+        if not demos:  # the dataset exists on this machine: the command is not needed, check the spec instead
+            assert str(sweep.settings.data["libero_object"].init_noise) == noise
+            continue
+        stage, command = demos[0]
+        assert stage == "demos" and command[command.index("--init-noise") + 1] == noise
+
+
 def test_paper_sweep_reads_every_policy_file():
     """configs/policy/*.json are `lerobot-train --config_path` files; the sweep takes their nested policy."""
     sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")

@@ -34,6 +34,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--render-interval", type=int, default=1,
                    help="render the cameras every k-th step, repeating the last images in between (default 1: "
                    "every step, LIBERO's layout; 4 = PredVLA's visual refresh, 4x cheaper)")
+    p.add_argument("--init-noise", type=float, default=0.0,
+                   help="std (rad) of Gaussian noise on the arm's initial joint angles at each reset (default 0: "
+                   "LIBERO ControlEnv's fixed start). The benchmark's official init states carry robosuite's "
+                   "default, 0.02; demonstrations without it never show the policy an arm that starts elsewhere")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 
@@ -53,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit("--per-task must be >= 1")
     if args.render_interval < 1:
         raise SystemExit("--render-interval must be >= 1")
+    if args.init_noise < 0:
+        raise SystemExit(f"--init-noise must be >= 0, got {args.init_noise}")
     if args.out is None and not args.no_render:
         raise SystemExit("--out is required (or pass --no-render to only measure expert success)")
     task_ids = args.tasks if args.tasks is not None else list(range(num_tasks(args.suite)))
@@ -62,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     for task_id in task_ids:
         spec = task_spec(args.suite, task_id)
         t0 = time.time()
-        env = make_env(spec)
+        env = make_env(spec, init_noise=args.init_noise)
         kept, attempts, notes = [], 0, []
         with tqdm(total=args.per_task, desc=f"{args.suite}/{task_id} rollouts", unit="demo") as bar:
             while len(kept) < args.per_task and attempts < max_attempts:
@@ -80,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         if kept and not args.no_render:
             render_env = make_env(spec, render=True)
             random_reset(render_env, 0)
-            attrs = {**file_attrs(spec, render_env), "predvla_render_interval": args.render_interval}
+            attrs = {**file_attrs(spec, render_env, args.init_noise), "predvla_render_interval": args.render_interval}
             for episode in tqdm(kept, desc=f"{args.suite}/{task_id} rendering", unit="demo"):
                 obs = replay_observations(render_env, episode, args.render_interval)
                 demos.append({**obs, "actions": episode.actions, "states": episode.states,
@@ -92,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         steps = sum(len(e.actions) for e in kept)
         report.append((spec, attempts, len(kept), steps, t_roll, time.time() - t0 - t_roll, notes))
 
-    print(f"\nExpert success ({args.suite}, seed {args.seed}):")
+    print(f"\nExpert success ({args.suite}, seed {args.seed}, initial joint noise {args.init_noise}):")
     print(f"{'task':>4}  {'attempts':>8}  {'successes':>9}  {'rate':>5}  {'steps/demo':>10}  "
           f"{'s/attempt':>9}  {'render s/demo':>13}  name")
     for spec, attempts, ok, steps, t_roll, t_render, _ in report:

@@ -26,8 +26,9 @@ def task_file(out: Path, spec: TaskSpec) -> Path:
     return Path(out) / spec.suite / f"{spec.name}_demo.hdf5"
 
 
-def file_attrs(spec: TaskSpec, env) -> dict[str, str]:
-    """`data` attributes as LIBERO's create_dataset.py writes them (paths relative to hf-libero)."""
+def file_attrs(spec: TaskSpec, env, init_noise: float = 0.0) -> dict[str, str]:
+    """`data` attributes as LIBERO's create_dataset.py writes them (paths relative to hf-libero); `init_noise` is the
+    arm's initial joint noise the demonstrations were recorded with (`env_kwargs`)."""
     from libero.libero.envs.bddl_utils import get_problem_info
     from robosuite import load_controller_config
 
@@ -35,7 +36,7 @@ def file_attrs(spec: TaskSpec, env) -> dict[str, str]:
     # The benchmark's instruction (what evaluation gives the policy); a few BDDL texts differ from it.
     problem_info["language_instruction"] = spec.language
     kwargs = {
-        **env_kwargs(spec, render=True),
+        **env_kwargs(spec, render=True, init_noise=init_noise),
         "bddl_file_name": spec.bddl_relpath,
         "robots": ["Panda"],
         "controller_configs": load_controller_config(default_controller="OSC_POSE"),

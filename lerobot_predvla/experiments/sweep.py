@@ -165,6 +165,8 @@ class DataSpec:
         tasks: Task ids (default: every task of the suite).
         render_interval: Render the cameras every k-th step (4 = PredVLA's visual refresh).
         demo_seed: Seed of the randomised resets of the demonstrations.
+        init_noise: Std (rad) of the noise on the arm's initial joint angles of the demonstrations
+            (`predvla demos --init-noise`; 0: LIBERO ControlEnv's fixed start, 0.02: the official init states').
         vision_weights: ResNet18 weights of the front end ('imagenet', a .pth file, or 'random': the offline
             substitute, printed as such).
         language_from: Instructions of the language PCA: 'libero' (all 40 of the task list, Section 4.1) or 'demos'.
@@ -177,6 +179,7 @@ class DataSpec:
     tasks: list[int] | None = None
     render_interval: int = 4
     demo_seed: int = 0
+    init_noise: float = 0.0
     vision_weights: str = "imagenet"
     language_from: str = "libero"
     frame_stride: int = 4
@@ -487,7 +490,8 @@ class Runner:
         if missing:
             commands.append(("demos", [*predvla, "demos", "--suite", suite, "--tasks", ",".join(map(str, missing)),
                                        "--per-task", str(spec.per_task), "--render-interval", str(spec.render_interval),
-                                       "--seed", str(spec.demo_seed), "--out", str(hdf5)]))
+                                       "--seed", str(spec.demo_seed), "--init-noise", str(spec.init_noise),
+                                       "--out", str(hdf5)]))
         if not (frontend / "metadata.json").is_file():
             commands.append(("frontend", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", suite,
                                           "--vision-weights", spec.vision_weights, "--language-from",

@@ -17,6 +17,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 CAMERAS = ("agentview", "robot0_eye_in_hand")
 IMAGE_SIZE = 128
+# robosuite's default initialization noise (std, rad, per arm joint): the official init states of the benchmark
+# start the arm with it (their joint angles spread by 0.017-0.022 rad on libero_object), LIBERO's ControlEnv with none.
+OFFICIAL_INIT_NOISE = 0.02
 INSTALL_HINT = "LIBERO is not installed in this venv: run `make libero`"
 
 
@@ -84,9 +87,16 @@ def num_tasks(suite: str) -> int:
     return benchmark.get_benchmark_dict()[suite]().n_tasks
 
 
-def env_kwargs(spec: TaskSpec, render: bool) -> dict:
-    """Keyword arguments of LIBERO's ControlEnv; `render` adds the two 128x128 cameras."""
+def env_kwargs(spec: TaskSpec, render: bool, init_noise: float = 0.0) -> dict:
+    """Keyword arguments of LIBERO's ControlEnv; `render` adds the two 128x128 cameras.
+
+    `init_noise`: std (rad) of the Gaussian noise robosuite adds to the arm's initial joint angles at every reset.
+    LIBERO's ControlEnv defaults to none; the benchmark's official init states carry robosuite's default,
+    `OFFICIAL_INIT_NOISE`.
+    """
+    noise = {"initialization_noise": {"magnitude": init_noise, "type": "gaussian"}} if init_noise > 0 else {}
     return {
+        **noise,
         "bddl_file_name": str(spec.bddl_file),
         "has_renderer": False,
         "has_offscreen_renderer": render,
@@ -100,17 +110,18 @@ def env_kwargs(spec: TaskSpec, render: bool) -> dict:
     }
 
 
-def make_env(spec: TaskSpec, render: bool = False):
+def make_env(spec: TaskSpec, render: bool = False, init_noise: float = 0.0):
     """A LIBERO ControlEnv (default OSC_POSE controller); physics only unless `render`."""
     _libero()
     from libero.libero.envs.env_wrapper import ControlEnv
 
-    return ControlEnv(**env_kwargs(spec, render))
+    return ControlEnv(**env_kwargs(spec, render, init_noise))
 
 
 def random_reset(env, seed: int) -> dict:
-    """Reset with object placements drawn from the BDDL regions (not the official init states)."""
-    np.random.seed(seed)  # robosuite's placement samplers draw from numpy's global generator
+    """Reset with object placements drawn from the BDDL regions (not the official init states), and the arm's
+    initial joint noise if the env has any (`make_env(init_noise=...)`)."""
+    np.random.seed(seed)  # robosuite's placement samplers and joint noise draw from numpy's global generator
     return env.reset()
 
 
