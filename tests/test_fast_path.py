@@ -5,6 +5,7 @@ from functools import partial
 
 import pytest
 import torch
+from rollout_checks import outputs_and_gradients
 
 from benchmarks.bench_core import control_stream, randomised_model, training_data, training_loss
 from lerobot_predvla import PredVLAConfig
@@ -47,14 +48,9 @@ def test_every_output_and_gradient_matches_reference_in_float64(overrides, with_
     extra_ab = torch.randn(steps, batch, 256, generator=g, dtype=torch.float64, requires_grad=True)
     results = []
     for rollout in (model.rollout, partial(reference_rollout, model)):
-        traj = rollout(model.initial_state(batch), model.language_term(language),
-                       c_q if with_posteriors else None, extra_ab=extra_ab)
-        outputs = [*traj.d, traj.d_prev_top, traj.q_hat, traj.a_hat, *traj.action_params, *traj.final.h]
-        weights = torch.Generator().manual_seed(2)
-        scalar = sum((x * torch.randn(x.shape, generator=weights, dtype=x.dtype)).sum() for x in outputs)
-        inputs = [*model.parameters(), extra_ab] + ([c_q] if with_posteriors else [])
-        grads = torch.autograd.grad(scalar, inputs, allow_unused=True)
-        results.append([*outputs, *(torch.zeros(()) if x is None else x for x in grads)])
+        posteriors = c_q if with_posteriors else None
+        traj = rollout(model.initial_state(batch), model.language_term(language), posteriors, extra_ab=extra_ab)
+        results.append(outputs_and_gradients(traj, model, extra_ab, posteriors))
     for fast, ref in zip(*results, strict=True):
         torch.testing.assert_close(fast, ref, rtol=0, atol=1e-10)
 

@@ -7,6 +7,7 @@ import dataclasses
 
 import pytest
 import torch
+from rollout_checks import outputs_and_gradients
 
 from benchmarks.bench_core import (
     control_step_fn,
@@ -50,14 +51,9 @@ def test_every_output_and_gradient_matches_python_in_float64(overrides, with_pos
         language = torch.randn(batch, 64, generator=g, dtype=torch.float64)
         c_q = (0.3 * torch.randn(steps, batch, 256, generator=g, dtype=torch.float64)).requires_grad_(with_posteriors)
         extra_ab = torch.randn(steps, batch, 256, generator=g, dtype=torch.float64, requires_grad=True)
-        traj = model.rollout(model.initial_state(batch), model.language_term(language),
-                             c_q if with_posteriors else None, extra_ab=extra_ab)
-        outputs = [*traj.d, traj.d_prev_top, traj.q_hat, traj.a_hat, *traj.action_params, *traj.final.h]
-        weights = torch.Generator().manual_seed(2)
-        scalar = sum((x * torch.randn(x.shape, generator=weights, dtype=x.dtype)).sum() for x in outputs)
-        inputs = [*model.parameters(), extra_ab] + ([c_q] if with_posteriors else [])
-        grads = torch.autograd.grad(scalar, inputs, allow_unused=True)
-        results.append([*outputs, *(torch.zeros(()) if x is None else x for x in grads)])
+        posteriors = c_q if with_posteriors else None
+        traj = model.rollout(model.initial_state(batch), model.language_term(language), posteriors, extra_ab=extra_ab)
+        results.append(outputs_and_gradients(traj, model, extra_ab, posteriors))
     for cpp, python in zip(results[1], results[0], strict=True):
         torch.testing.assert_close(cpp, python, rtol=0, atol=1e-10)
 
