@@ -123,16 +123,30 @@ def weight_gradients(
     return grad_w
 
 
+def unpack_inputs(
+    args: tuple[Tensor, ...],
+) -> tuple[list[Tensor], list[Tensor], list[Tensor], Tensor, Tensor, FusedWeights]:
+    """The flat autograd inputs of either backend: priors p, initial states h and d per module, a0, q0, weights."""
+    return list(args[0:4]), list(args[4:8]), list(args[8:12]), args[12], args[13], FusedWeights(*args[14:])
+
+
+def pack_outputs(
+    meta: Meta, dbuf: list[Tensor], out: Tensor, abuf: Tensor, y1: Tensor, h_final: tuple[Tensor, ...] | list[Tensor]
+) -> tuple[Tensor, ...]:
+    """Either backend's forward outputs: d per module over the steps, q_hat, the action buffer, y1, final states."""
+    q_hat = out[..., : meta.proprio_dim].contiguous()
+    return (*(buf[1:] for buf in dbuf), q_hat, abuf, y1, *h_final)
+
+
 class _Recurrence(torch.autograd.Function):
     @staticmethod
     def forward(ctx, meta: Meta, *args: Tensor):
-        p, h, d, (a0, q0), w = list(args[0:4]), list(args[4:8]), list(args[8:12]), args[12:14], FusedWeights(*args[14:])
+        p, h, d, a0, q0, w = unpack_inputs(args)
         (dbuf, gbuf, inbuf, y1, out, abuf, index), h_final = _forward(meta, p, h, d, a0, q0, w)
         ctx.meta = meta
         ctx.save_for_backward(*dbuf, *gbuf, *inbuf[1:], y1, out, abuf, index, *w)
         ctx.has_va = w.w_va is not None
-        q_hat = out[..., : meta.proprio_dim].contiguous()
-        return (*(buf[1:] for buf in dbuf), q_hat, abuf, y1, *h_final)
+        return pack_outputs(meta, dbuf, out, abuf, y1, h_final)
 
     @staticmethod
     def backward(ctx, *grads: Tensor | None):

@@ -23,7 +23,13 @@ from types import ModuleType
 import torch
 from torch import Tensor
 
-from lerobot_predvla.policies.predvla.recurrence import FusedWeights, Meta, weight_gradients
+from lerobot_predvla.policies.predvla.recurrence import (
+    FusedWeights,
+    Meta,
+    pack_outputs,
+    unpack_inputs,
+    weight_gradients,
+)
 
 SOURCE = r"""
 #include <torch/extension.h>
@@ -423,7 +429,7 @@ class _CppRecurrence(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, meta: Meta, *args: Tensor):
-        p, h, d, (a0, q0), w = list(args[0:4]), list(args[4:8]), list(args[8:12]), args[12:14], FusedWeights(*args[14:])
+        p, h, d, a0, q0, w = unpack_inputs(args)
         outs = extension().forward(
             list(meta.alpha), meta.efference, meta.num_mixtures, meta.action_dim, meta.proprio_dim, p, h, d, a0, q0,
             [w.w_t.t(), w.w_v.t(), w.w_at.t(), w.w_ab.t()], None if w.w_va is None else w.w_va.t(),
@@ -432,8 +438,7 @@ class _CppRecurrence(torch.autograd.Function):
         dbuf, gbuf, inbuf, (y1, out, abuf, index), h_final = outs[0:4], outs[4:8], outs[8:11], outs[11:15], outs[15:19]
         ctx.meta = meta
         ctx.save_for_backward(*dbuf, *gbuf, *inbuf, y1, abuf, index, *w)
-        q_hat = out[..., : meta.proprio_dim].contiguous()
-        return (*(buf[1:] for buf in dbuf), q_hat, abuf, y1, *h_final)
+        return pack_outputs(meta, dbuf, out, abuf, y1, h_final)
 
     @staticmethod
     def backward(ctx, *grads: Tensor | None):
