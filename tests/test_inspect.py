@@ -38,9 +38,35 @@ def test_inspect_reports_every_checkpoint_and_draws_the_figures(trained, tmp_pat
     er = last["error_regression"]
     assert er["er_action_mse"] >= 0 and er["open_loop_action_mse"] >= 0
     assert er["er_eps_v"] > 0 and er["er_eps_q"] > 0  # finite: the visual error of the refresh steps
+    # Eq. 7's eps_q per proprioceptive dimension: open loop, from the training posteriors, and the demo floor.
+    q = last["proprio_error_per_dim"]
+    assert set(q) == {"open_loop", "posteriors", "demo_spread"}
+    assert len({len(v) for v in q.values()}) == 1 and len(q["open_loop"]) > 1
+    assert all(0.0 <= x < 1e3 for v in q.values() for x in v) and sum(q["demo_spread"]) > 0.0
     for name in ("open_loop_vs_demos", "language_swap", "prior_posterior_gap", "errors_over_episode",
-                 "training_curves"):
+                 "training_curves", "proprio_error_per_dim"):
         assert (out / f"{name}.png").stat().st_size > 1000
+
+
+def test_proprio_report_averages_to_the_models_eps_q(trained, synthetic_dataset):
+    """The per-dimension open-loop error, averaged over dimensions, is Eq. 7's eps_q of the same rollout."""
+    import torch
+
+    from lerobot_predvla.policies.predvla import diagnostics as dx
+    from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
+
+    policy = PredVLAPolicy.from_pretrained(trained / "checkpoints" / "last" / "pretrained_model").eval()
+    data = dx.TaskData.load(synthetic_dataset, policy)
+    per_dim = dx.proprio_report(policy, data, None)
+    assert set(per_dim) == {"open_loop", "demo_spread"}
+    model, seq = policy.model, data.sequences
+    batch = seq.batch(torch.arange(seq.state.shape[0]), torch.device("cpu"))
+    with torch.no_grad():
+        traj = model.rollout(model.initial_state(len(batch["language"])), model.language_term(batch["language"]),
+                             steps=batch["valid"].shape[0])
+        _, eps_q = model.prediction_errors(traj, batch["vision"], batch["state"])
+    expected = float(eps_q[batch["valid"]].mean())
+    assert sum(per_dim["open_loop"]) / len(per_dim["open_loop"]) == pytest.approx(expected, rel=1e-5)
 
 
 def test_inspect_names_a_path_without_checkpoint(tmp_path, capsys):

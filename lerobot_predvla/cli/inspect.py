@@ -9,6 +9,8 @@ checkpoint is inspected (cheap numbers, drawn over training steps) and the last 
 - errors_over_episode.png: per-step prediction errors, complexity and free energy during error regression;
 - prior_posterior_gap.png: the posterior-prior gap per module, training posteriors and error regression;
 - language_swap.png: open-loop actions under each instruction against each task's mean demonstration;
+- proprio_error_per_dim.png: the proprioceptive prediction error per dimension, open loop and from the training
+  posteriors, beside the demonstrations' spread around their task's mean;
 - training_curves.png (several checkpoints): the same numbers over training.
 """
 
@@ -82,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         store = dx.load_store(path)
         if store is not None:
             report["posteriors"] = dx.posterior_report(policy, data, store)
+        report["proprio_error_per_dim"] = dx.proprio_report(policy, data, store)
         history.append(report)
     last = history[-1]
     replay = None
@@ -112,6 +115,11 @@ def print_summary(report: dict) -> None:
     for name, p in report.get("posteriors", {}).items():
         print(f"posteriors {name:>8}: |c_q| {p['mean_norm']:.3f}, per-task means {p['between_task_mean_distance']:.3f}"
               f" apart vs {p['within_task_spread']:.3f} within a task, |c_q - c_p| {p['prior_gap']:.3f}")
+    q = report["proprio_error_per_dim"]
+    for name in ("open_loop", "posteriors", "demo_spread"):
+        if name in q:
+            print(f"proprioceptive error per dimension, {name.replace('_', ' ')}: "
+                  + " ".join(f"{v:.1e}" for v in q[name]) + f" (mean {sum(q[name]) / len(q[name]):.4f})")
     if "error_regression" in report:
         er = report["error_regression"]
         print(f"error regression replayed on one demonstration per task: action MSE {er['er_action_mse']:.4f} "
@@ -186,6 +194,19 @@ def plot_all(out: Path, data, history: list[dict], replay: dict | None) -> None:
     for ax in axes:
         ax.title.set_fontsize(9)
     save(fig, "prior_posterior_gap.png")
+
+    q = last["proprio_error_per_dim"]
+    shown = [name for name in ("open_loop", "posteriors", "demo_spread") if name in q]
+    fig, ax = plt.subplots(figsize=(1 + 0.7 * len(q["open_loop"]), 3.2))
+    width = 0.8 / len(shown)
+    for i, name in enumerate(shown):
+        ax.bar([k + (i - (len(shown) - 1) / 2) * width for k in range(len(q[name]))], q[name], width,
+               label=name.replace("_", " "))
+    ax.set(xticks=range(len(q["open_loop"])), xlabel="proprioceptive dimension", yscale="log",
+           title="proprioceptive prediction error per dimension (normalised MSE, training episodes)")
+    ax.title.set_fontsize(9)
+    ax.legend(fontsize=7)
+    save(fig, "proprio_error_per_dim.png")
 
     if replay is not None:
         fig, axes = plt.subplots(1, 4, figsize=(15, 3.2))

@@ -8,6 +8,7 @@ Everything is computed offline against the training dataset's cached columns, wi
   actions move; the drive of the language term W_lang l (Eq. 4) and of its differences between tasks;
 - the training posteriors c_q (Eq. 10) per module: their size, their per-task means against the spread
   within a task, and their gap to the priors c_p (Eqs. 1-2) along the training rollout;
+- the proprioceptive prediction error per dimension (Eq. 7), open loop and from the training posteriors;
 - error regression replayed on one demonstration per task (its own observations, step by step as when
   acting): per-step prediction errors (Eq. 7), prior-posterior gap per module (Eq. 8), free energy (Eq. 9),
   and its actions against the demonstrated ones next to the open-loop chain's.
@@ -154,6 +155,37 @@ def posterior_report(policy: PredVLAPolicy, data: TaskData, store: Tensor) -> di
             "between_task_mean_distance": float(np.mean(between)) if between else 0.0,
             "prior_gap": float((gap[..., m:m + 1] * gap_valid).sum() / gap_valid.sum()),
         }
+    return out
+
+
+@torch.no_grad()
+def proprio_report(policy: PredVLAPolicy, data: TaskData, store: Tensor | None) -> dict:
+    """Eq. 7's eps_q per proprioceptive dimension (normalised units, every training episode's valid steps).
+
+    Of the exact open-loop chain and, where the checkpoint has them, of the rollout from each demonstration's
+    own training posteriors; beside them the demonstrations' spread around their task's time-aligned mean state,
+    which no observation-blind chain can get below. Posteriors that explain how demonstrations differ bring the
+    second well below the first.
+    """
+    model, seq = policy.model, data.sequences
+    batch = seq.batch(torch.arange(seq.state.shape[0]), torch.device("cpu"))
+    valid, state = batch["valid"], batch["state"]  # (L, E), (L, E, P)
+    lang_term = model.language_term(batch["language"])
+
+    def per_dim(q_hat: Tensor) -> list[float]:
+        return (q_hat - state)[valid].pow(2).mean(0).tolist()
+
+    out = {"open_loop": per_dim(model.rollout(model.initial_state(valid.shape[1]), lang_term,
+                                              steps=valid.shape[0]).q_hat)}
+    if store is not None:
+        out["posteriors"] = per_dim(model.rollout(model.initial_state(valid.shape[1]), lang_term,
+                                                  store.transpose(0, 1)).q_hat)
+    mean_state = state.clone()
+    w = valid.float()[..., None]
+    for eps in data.episodes:
+        mean_state[:, eps] = ((state[:, eps] * w[:, eps]).sum(1, keepdim=True)
+                              / w[:, eps].sum(1, keepdim=True).clamp_min(1))
+    out["demo_spread"] = per_dim(mean_state)
     return out
 
 
