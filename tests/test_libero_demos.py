@@ -126,6 +126,25 @@ def test_a_stale_config_names_the_file_and_key(tmp_path, monkeypatch):
     assert re.search(r"config.yaml: `bddl_files` is .*gone.*make libero", out.stderr.splitlines()[-1])
 
 
+def test_wrist_centre_half_turn_keeps_one_wrist_branch_under_start_noise(libero):
+    """Salad dressing with the official init states' arm noise: the 'nearest' half turn lets the start noise pick
+    the wrist branch (two resets end half a turn apart); 'wrist_centre' ends both on one branch. All succeed."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.rollout import run_episode
+
+    env = env_mod.make_env(env_mod.task_spec(SUITE, 2), init_noise=env_mod.OFFICIAL_INIT_NOISE)
+    wrist = env.env.robots[0].robot_joints[-1]
+    ends = {}
+    for rule in ("nearest", "wrist_centre"):
+        for seed in (1000, 1002):
+            episode = run_episode(env, seed, max_steps=280, half_turn=rule)
+            assert episode.success, (rule, seed, episode.note)
+            ends[rule, seed] = env.sim.data.qpos[env.sim.model.get_joint_qpos_addr(wrist)]
+    env.close()
+    assert abs(ends["nearest", 1000] - ends["nearest", 1002]) > 2.5, ends  # about pi apart
+    assert abs(ends["wrist_centre", 1000] - ends["wrist_centre", 1002]) < 0.3, ends
+
+
 def test_expert_turns_on_the_stove(libero):
     """An articulated goal (`Turnon`): the knob is grasped and twisted from a randomised reset, physics only."""
     env_mod, _ = libero

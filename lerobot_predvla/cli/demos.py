@@ -11,6 +11,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from lerobot_predvla.libero.expert.motion import HALF_TURN_RULES
+
 
 def task_ids(text: str) -> list[int]:
     try:
@@ -38,6 +40,10 @@ def add_parser(subparsers) -> None:
                    help="std (rad) of Gaussian noise on the arm's initial joint angles at each reset (default 0: "
                    "LIBERO ControlEnv's fixed start). The benchmark's official init states carry robosuite's "
                    "default, 0.02; demonstrations without it never show the policy an arm that starts elsewhere")
+    p.add_argument("--half-turn", choices=HALF_TURN_RULES, default="nearest",
+                   help="which of a finger direction and its half turn the expert grasps with: the one nearer the "
+                   "current fingers (default; every recorded dataset) or the one leaving the wrist joint nearer the "
+                   "middle of its range (one wrist branch per task also with --init-noise)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 
@@ -72,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         kept, attempts, notes = [], 0, []
         with tqdm(total=args.per_task, desc=f"{args.suite}/{task_id} rollouts", unit="demo") as bar:
             while len(kept) < args.per_task and attempts < max_attempts:
-                episode = run_episode(env, episode_seed(args.seed, task_id, attempts), max_steps)
+                episode = run_episode(env, episode_seed(args.seed, task_id, attempts), max_steps, args.half_turn)
                 attempts += 1
                 if episode.success:
                     kept.append(episode)
@@ -86,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
         if kept and not args.no_render:
             render_env = make_env(spec, render=True)
             random_reset(render_env, 0)
-            attrs = {**file_attrs(spec, render_env, args.init_noise), "predvla_render_interval": args.render_interval}
+            attrs = {**file_attrs(spec, render_env, args.init_noise), "predvla_render_interval": args.render_interval,
+                     "predvla_half_turn": args.half_turn}
             for episode in tqdm(kept, desc=f"{args.suite}/{task_id} rendering", unit="demo"):
                 obs = replay_observations(render_env, episode, args.render_interval)
                 demos.append({**obs, "actions": episode.actions, "states": episode.states,

@@ -23,6 +23,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
+from lerobot_predvla.libero.expert.motion import HALF_TURN_RULES
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
 from lerobot_predvla.utils.checkpoints import last_pretrained
 from lerobot_predvla.utils.io import atomic_write_json
@@ -167,6 +168,9 @@ class DataSpec:
         demo_seed: Seed of the randomised resets of the demonstrations.
         init_noise: Std (rad) of the noise on the arm's initial joint angles of the demonstrations
             (`predvla demos --init-noise`; 0: LIBERO ControlEnv's fixed start, 0.02: the official init states').
+        half_turn: Which of a finger direction and its half turn the expert grasps with (`predvla demos
+            --half-turn`): 'nearest' (the current fingers') or 'wrist_centre' (the wrist joint nearer the middle of
+            its range: one wrist branch per task also with init_noise).
         vision_weights: ResNet18 weights of the front end ('imagenet', a .pth file, or 'random': the offline
             substitute, printed as such).
         language_from: Instructions of the language PCA: 'libero' (all 40 of the task list, Section 4.1) or 'demos'.
@@ -180,6 +184,7 @@ class DataSpec:
     render_interval: int = 4
     demo_seed: int = 0
     init_noise: float = 0.0
+    half_turn: str = "nearest"
     vision_weights: str = "imagenet"
     language_from: str = "libero"
     frame_stride: int = 4
@@ -246,6 +251,10 @@ class Sweep:
             raise SweepError(f"{path}: {err}") from err
         if settings.eval_workers < 1:
             raise SweepError(f"{path}: eval.workers must be >= 1, got {settings.eval_workers}.")
+        for suite, spec in settings.data.items():
+            if spec.half_turn not in HALF_TURN_RULES:
+                raise SweepError(f"{path}: data.{suite}.half_turn must be one of {HALF_TURN_RULES}, "
+                                 f"got {spec.half_turn!r}.")
         sweep = cls(settings, {}, path.parent)
         for spec in configs:
             if spec.name in sweep.configs:
@@ -491,7 +500,7 @@ class Runner:
             commands.append(("demos", [*predvla, "demos", "--suite", suite, "--tasks", ",".join(map(str, missing)),
                                        "--per-task", str(spec.per_task), "--render-interval", str(spec.render_interval),
                                        "--seed", str(spec.demo_seed), "--init-noise", str(spec.init_noise),
-                                       "--out", str(hdf5)]))
+                                       "--half-turn", spec.half_turn, "--out", str(hdf5)]))
         if not (frontend / "metadata.json").is_file():
             commands.append(("frontend", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", suite,
                                           "--vision-weights", spec.vision_weights, "--language-from",

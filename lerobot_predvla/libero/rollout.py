@@ -34,15 +34,16 @@ def _model_xml(env, fixtures: dict[str, tuple[np.ndarray, np.ndarray]]) -> str:
     return ElementTree.tostring(root, encoding="unicode")
 
 
-def run_episode(env, seed: int, max_steps: int) -> Episode:
-    """Randomised reset (never an official init state), then the scripted expert until success."""
+def run_episode(env, seed: int, max_steps: int, half_turn: str = "nearest") -> Episode:
+    """Randomised reset (never an official init state), then the scripted expert (`half_turn`: HALF_TURN_RULES)
+    until success."""
     random_reset(env, seed)
     for _ in range(SETTLE_STEPS):
         env.step(IDLE)
     fixtures = fixture_poses(env)
     actions, states, success, note = [], [], False, ""
     try:
-        expert = ScriptedExpert(env)
+        expert = ScriptedExpert(env, half_turn=half_turn)
         for _ in range(max_steps):
             states.append(env.get_sim_state())
             actions.append(expert.act())

@@ -8,6 +8,7 @@ import numpy as np
 
 from lerobot_predvla.libero.expert.articulate import Articulating
 from lerobot_predvla.libero.expert.motion import (
+    HALF_TURN_RULES,
     MAX_FINGER_SPAN,
     MIN_GRASP_HEIGHT,
     OPEN,
@@ -25,7 +26,11 @@ __all__ = ["ExpertFailure", "ScriptedExpert"]
 class ScriptedExpert(Placing, Pushing, Articulating):
     """Solves LIBERO goals (`In`, `On`, `Open`, `Close`, `Turnon`); call `act()` once per control step."""
 
-    def __init__(self, env, speed: float = 1.0, rng: np.random.Generator | None = None) -> None:
+    def __init__(self, env, speed: float = 1.0, rng: np.random.Generator | None = None,
+                 half_turn: str = "nearest") -> None:
+        if half_turn not in HALF_TURN_RULES:
+            raise ValueError(f"half_turn must be one of {HALF_TURN_RULES}, got {half_turn!r}")
+        self.half_turn = half_turn
         self.view = SceneView(env)
         self.goal = [tuple(p) for p in env.env.parsed_problem["goal_state"]]
         unsupported = [p for p in self.goal if p[0] not in SKILL_ORDER]

@@ -20,6 +20,12 @@ HANDLE_WIDTH = 0.03  # a wide object's handle: thinner than this across, grasped
 RIM_LEAN = 0.5  # tan of the lean along the rim a rim grasp may take to keep the hand off an overhang
 DOWN = np.array([0.0, 0.0, -1.0])
 SKILL_ORDER = {"open": 0, "turnon": 0, "in": 1, "on": 1, "close": 2}  # plan order of goal predicates
+# How the expert picks between a finger direction and its half turn (`predvla demos --half-turn`):
+# "nearest": the one nearer the current finger direction (every recorded dataset so far). Near a tie, as on three
+#   libero_object tasks when the arm's start carries the official init states' joint noise, the start noise
+#   decides, and demonstrations of one task end on wrist angles half a turn apart (docs/libero_object_cpu.md).
+# "wrist_centre": the one that leaves the wrist joint nearer the middle of its range; ties are far from the start.
+HALF_TURN_RULES = ("nearest", "wrist_centre")
 
 Skill = Iterator[np.ndarray]
 
@@ -74,18 +80,30 @@ def _rotation_error(z_now: np.ndarray, f_now: np.ndarray, z_goal: np.ndarray, f_
 
 
 class Motion:
-    """Low-level control shared by every skill; `view` (a SceneView) and `speed` are set by ScriptedExpert."""
+    """Low-level control shared by every skill; `view` (a SceneView), `speed` and `half_turn` are set by
+    ScriptedExpert."""
 
     view: SceneView
     speed: float
+    half_turn: str
 
     def _finger_goal(self, axis: np.ndarray, finger: np.ndarray | None) -> np.ndarray:
-        """Goal finger direction: `finger` (xy or 3D) made normal to `axis`, of the sign nearest the current
-        one once the gripper is tilted onto `axis`; None keeps the current finger direction."""
+        """Goal finger direction: `finger` (xy or 3D) made normal to `axis`; None keeps the current finger
+        direction. A parallel gripper is symmetric under a half turn, so `finger` and `-finger` grasp alike:
+        `half_turn` picks one (HALF_TURN_RULES)."""
         f_now = _tilt(self.view.eef_axis_z(), axis) @ self.view.finger_axis()
         f = f_now if finger is None else np.pad(finger, (0, 3 - len(finger)))
         f = _unit(f - (f @ axis) * axis)
-        return f if f @ f_now >= 0 else -f  # a parallel gripper is symmetric under a half turn
+        if self.half_turn == "nearest":
+            return f if f @ f_now >= 0 else -f
+        joint = self.view.inner.robots[0].robot_joints[-1]  # the wrist: turns the fingers about the approach axis
+        q, wrist_axis = self.view.joint_qpos(joint), self.view.joint_axis(joint)
+        mid = float(self.view.joint_range(joint).mean())
+
+        def wrist_after(g: np.ndarray) -> float:  # the wrist angle once the fingers are turned from f_now onto g
+            return q + float(np.arctan2(np.cross(f_now, g) @ wrist_axis, f_now @ g))
+
+        return f if abs(wrist_after(f) - mid) <= abs(wrist_after(-f) - mid) else -f
 
     def _rot_error(self, axis: np.ndarray, finger: np.ndarray | None) -> np.ndarray:
         v = self.view
