@@ -203,7 +203,8 @@ def plot_all(out: Path, data, history: list[dict], replay: dict | None) -> None:
         ax.bar([k + (i - (len(shown) - 1) / 2) * width for k in range(len(q[name]))], q[name], width,
                label=name.replace("_", " "))
     ax.set(xticks=range(len(q["open_loop"])), xlabel="proprioceptive dimension", yscale="log",
-           title="proprioceptive prediction error per dimension (normalised MSE, training episodes)")
+           title="proprioceptive prediction error per dimension\n(Eq. 7, squared error in the preprocessed units, "
+                 "training episodes)")
     ax.title.set_fontsize(9)
     ax.legend(fontsize=7)
     save(fig, "proprio_error_per_dim.png")
