@@ -145,6 +145,35 @@ def test_wrist_centre_half_turn_keeps_one_wrist_branch_under_start_noise(libero)
     assert abs(ends["wrist_centre", 1000] - ends["wrist_centre", 1002]) < 0.3, ends
 
 
+def test_expert_success_from_the_official_init_states(libero):
+    """`predvla demos --no-render --official-init-states` measures the expert where the policies are evaluated:
+    attempt k starts from official init state k (the arm's joint noise included). Recording from them is refused."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.rollout import run_episode
+
+    cli = [sys.executable, "-m", "lerobot_predvla.cli.main", "demos", "--suite", SUITE, "--tasks", "2",
+           "--per-task", "2", "--max-attempts", "2", "--official-init-states"]
+    out = subprocess.run([*cli, "--no-render"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "official init states" in out.stdout
+    assert re.search(r"^\s+2\s+2\s+2\s+100%", out.stdout, re.M), out.stdout
+    refused = subprocess.run([*cli, "--out", "unused"], capture_output=True, text=True)
+    assert refused.returncode != 0 and "--no-render" in refused.stderr
+
+    env = env_mod.make_env(env_mod.task_spec(SUITE, 2))
+    states = env_mod.official_init_states(SUITE, 2)
+    episode = run_episode(env, 0, max_steps=280, init_state=states[1])
+    env.close()
+    assert episode.success, episode.note
+    # The start is the init state's, not a seeded randomised reset's: another seed starts identically.
+    env = env_mod.make_env(env_mod.task_spec(SUITE, 2))
+    again = run_episode(env, 99, max_steps=1, init_state=states[1])
+    randomised = [run_episode(env, seed, max_steps=1).states[0] for seed in (0, 99)]
+    env.close()
+    np.testing.assert_array_equal(again.states[0], episode.states[0])
+    assert np.abs(randomised[0] - randomised[1]).max() > 1e-3
+
+
 def test_expert_turns_on_the_stove(libero):
     """An articulated goal (`Turnon`): the knob is grasped and twisted from a randomised reset, physics only."""
     env_mod, _ = libero

@@ -44,6 +44,10 @@ def add_parser(subparsers) -> None:
                    help="which of a finger direction and its half turn the expert grasps with: the one nearer the "
                    "current fingers (default; every recorded dataset) or the one leaving the wrist joint nearer the "
                    "middle of its range (one wrist branch per task also with --init-noise)")
+    p.add_argument("--official-init-states", action="store_true",
+                   help="with --no-render only: start attempt k from the benchmark's official init state k instead "
+                   "of a randomised reset, to measure the expert where the policies are evaluated (demonstrations "
+                   "are never recorded from evaluation states)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 
@@ -54,7 +58,7 @@ def episode_seed(seed: int, task_id: int, attempt: int) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from lerobot_predvla.data.hdf5_layout import file_attrs, task_file, write_task_file
-    from lerobot_predvla.libero.env import make_env, num_tasks, random_reset, task_spec
+    from lerobot_predvla.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
     from lerobot_predvla.libero.protocol import STEP_CAPS
     from lerobot_predvla.libero.render import replay_observations
     from lerobot_predvla.libero.rollout import run_episode
@@ -65,6 +69,9 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit("--render-interval must be >= 1")
     if args.init_noise < 0:
         raise SystemExit(f"--init-noise must be >= 0, got {args.init_noise}")
+    if args.official_init_states and not args.no_render:
+        raise SystemExit("--official-init-states only measures expert success: pass --no-render with it "
+                         "(demonstrations never start from the evaluation init states)")
     if args.out is None and not args.no_render:
         raise SystemExit("--out is required (or pass --no-render to only measure expert success)")
     task_ids = args.tasks if args.tasks is not None else list(range(num_tasks(args.suite)))
@@ -75,10 +82,13 @@ def run(args: argparse.Namespace) -> int:
         spec = task_spec(args.suite, task_id)
         t0 = time.time()
         env = make_env(spec, init_noise=args.init_noise)
+        init_states = official_init_states(args.suite, task_id) if args.official_init_states else None
         kept, attempts, notes = [], 0, []
         with tqdm(total=args.per_task, desc=f"{args.suite}/{task_id} rollouts", unit="demo") as bar:
             while len(kept) < args.per_task and attempts < max_attempts:
-                episode = run_episode(env, episode_seed(args.seed, task_id, attempts), max_steps, args.half_turn)
+                start = None if init_states is None else init_states[attempts % len(init_states)]
+                episode = run_episode(env, episode_seed(args.seed, task_id, attempts), max_steps, args.half_turn,
+                                      init_state=start)
                 attempts += 1
                 if episode.success:
                     kept.append(episode)
@@ -105,7 +115,9 @@ def run(args: argparse.Namespace) -> int:
         steps = sum(len(e.actions) for e in kept)
         report.append((spec, attempts, len(kept), steps, t_roll, time.time() - t0 - t_roll, notes))
 
-    print(f"\nExpert success ({args.suite}, seed {args.seed}, initial joint noise {args.init_noise}):")
+    starts = "official init states" if args.official_init_states else \
+        f"randomised resets, seed {args.seed}, initial joint noise {args.init_noise}"
+    print(f"\nExpert success ({args.suite}, {starts}, half turn {args.half_turn}):")
     print(f"{'task':>4}  {'attempts':>8}  {'successes':>9}  {'rate':>5}  {'steps/demo':>10}  "
           f"{'s/attempt':>9}  {'render s/demo':>13}  name")
     for spec, attempts, ok, steps, t_roll, t_render, _ in report:

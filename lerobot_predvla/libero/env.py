@@ -87,6 +87,12 @@ def num_tasks(suite: str) -> int:
     return benchmark.get_benchmark_dict()[suite]().n_tasks
 
 
+def official_init_states(suite: str, task_id: int) -> np.ndarray:
+    """The benchmark's official evaluation init states of one task (50 flattened simulator states)."""
+    _, benchmark = _libero()
+    return benchmark.get_benchmark_dict()[suite]().get_task_init_states(task_id)
+
+
 def env_kwargs(spec: TaskSpec, render: bool, init_noise: float = 0.0) -> dict:
     """Keyword arguments of LIBERO's ControlEnv; `render` adds the two 128x128 cameras.
 

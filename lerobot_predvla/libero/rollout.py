@@ -34,10 +34,16 @@ def _model_xml(env, fixtures: dict[str, tuple[np.ndarray, np.ndarray]]) -> str:
     return ElementTree.tostring(root, encoding="unicode")
 
 
-def run_episode(env, seed: int, max_steps: int, half_turn: str = "nearest") -> Episode:
-    """Randomised reset (never an official init state), then the scripted expert (`half_turn`: HALF_TURN_RULES)
-    until success."""
-    random_reset(env, seed)
+def run_episode(env, seed: int, max_steps: int, half_turn: str = "nearest",
+                init_state: np.ndarray | None = None) -> Episode:
+    """Randomised reset, then the scripted expert (`half_turn`: HALF_TURN_RULES) until success. With `init_state`
+    (one of the benchmark's official evaluation init states) the episode starts there instead: only to measure the
+    expert's success where the policies are evaluated, never to record demonstrations."""
+    if init_state is None:
+        random_reset(env, seed)
+    else:
+        env.reset()
+        env.set_init_state(init_state)
     for _ in range(SETTLE_STEPS):
         env.step(IDLE)
     fixtures = fixture_poses(env)

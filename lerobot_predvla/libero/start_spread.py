@@ -13,7 +13,7 @@ import sys
 
 import numpy as np
 
-from lerobot_predvla.libero.env import make_env, random_reset, task_spec
+from lerobot_predvla.libero.env import make_env, official_init_states, random_reset, task_spec
 from lerobot_predvla.libero.protocol import SUITES
 
 RESET_SEED = 1000  # randomised resets start from this seed, away from the demonstrations' (`predvla demos`)
@@ -32,11 +32,9 @@ def _placements(env) -> dict[str, np.ndarray]:
 def start_spread(suite: str, task_id: int, n: int = 20, init_noise: float = 0.0) -> dict[str, dict]:
     """Per start kind ("official", "randomised"): the mean over the arm's joints of their std across `n` starts
     (rad), and per object the mean over x, y of its std (m)."""
-    from libero.libero import benchmark
-
     env = make_env(task_spec(suite, task_id), init_noise=init_noise)
     starts: dict[str, list[tuple[np.ndarray, dict]]] = {"official": [], "randomised": []}
-    init_states = benchmark.get_benchmark_dict()[suite]().get_task_init_states(task_id)
+    init_states = official_init_states(suite, task_id)
     for k in range(n):
         env.reset()
         env.set_init_state(init_states[k % len(init_states)])
