@@ -1,8 +1,8 @@
 """`predvla demos`: scripted-expert LIBERO demonstrations in the original hdf5 layout.
 
-Episodes start from randomised resets (never the official evaluation init states) and roll out
-without rendering; only successful ones are kept, and their 128x128 images are rendered afterwards
-by replaying the saved states.
+Episodes start from randomised resets (never the official evaluation init states; `--official-init-states`
+only measures the expert's success there) and roll out without rendering; only successful ones are kept, and
+their 128x128 images are rendered afterwards by replaying the saved states.
 """
 
 import argparse

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from lerobot_predvla.libero.env import make_env, num_tasks, random_reset, task_spec
+from lerobot_predvla.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
 from lerobot_predvla.libero.protocol import SUITES
 
 
@@ -16,18 +16,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--suites", nargs="+", default=list(SUITES), choices=SUITES)
     parser.add_argument("--steps", type=int, default=20, help="zero-action steps per task")
     args = parser.parse_args(argv)
-    from libero.libero import benchmark
 
     failures, start = [], time.time()
     for suite in args.suites:
-        bench = benchmark.get_benchmark_dict()[suite]()
         for task_id in range(num_tasks(suite)):
             spec = task_spec(suite, task_id)
             t0 = time.time()
             try:
                 env = make_env(spec)
                 random_reset(env, seed=task_id)
-                env.set_init_state(bench.get_task_init_states(task_id)[0])
+                env.set_init_state(official_init_states(suite, task_id)[0])
                 t1 = time.time()
                 for _ in range(args.steps):
                     env.step(np.zeros(7))
