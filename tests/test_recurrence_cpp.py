@@ -1,9 +1,11 @@
 """The compiled recurrence (`recurrence_backend="cpp"`) against the Python fast path it replaces.
 
-The first test builds the C++ extension (~25-60 s once; cached in torch's extension directory afterwards).
+The first test builds the C++ extension (~25-60 s once; cached in `recurrence_cpp.build_directory()` afterwards).
 """
 
 import dataclasses
+import subprocess
+import sys
 
 import pytest
 import torch
@@ -32,6 +34,33 @@ def models(dtype: torch.dtype = torch.float32, **overrides) -> tuple:
     config = PredVLAConfig(device="cpu", **overrides)
     return tuple(randomised_model(dataclasses.replace(config, recurrence_backend=backend)).to(dtype)
                  for backend in ("python", "cpp"))
+
+
+DIE_MIDWAY_THROUGH_A_BUILD = """
+import os, sys
+from pathlib import Path
+from lerobot_predvla.policies.predvla.recurrence_cpp import exclusive_build
+directory = Path(sys.argv[1])
+with exclusive_build(directory):
+    (directory / "lock").touch()  # torch's FileBaton lock, taken at the start of a build
+    os._exit(1)  # killed before torch removes it
+"""
+
+
+def test_a_build_killed_midway_does_not_block_the_next(tmp_path, caplog):
+    directory = tmp_path / "predvla_recurrence"
+    killed = subprocess.run([sys.executable, "-c", DIE_MIDWAY_THROUGH_A_BUILD, str(directory)], timeout=120)
+    assert killed.returncode == 1 and (directory / "lock").exists()  # torch's FileBaton would wait on this forever
+    with caplog.at_level("WARNING"), recurrence_cpp.exclusive_build(directory):
+        assert not (directory / "lock").exists()
+    assert "interrupted build" in caplog.text
+
+
+def test_the_build_directory_is_per_python_and_torch_version(monkeypatch, tmp_path):
+    monkeypatch.setenv("TORCH_EXTENSIONS_DIR", str(tmp_path))
+    directory = recurrence_cpp.build_directory()
+    assert directory.parent.parent == tmp_path and directory.name == "predvla_recurrence"
+    assert torch.__version__.split("+")[0] in directory.parent.name
 
 
 def test_backend_is_validated():

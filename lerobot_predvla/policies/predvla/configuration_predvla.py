@@ -91,7 +91,7 @@ class PredVLAConfig(CachedFeaturesConfig):
             BPTT; same results, `tests/test_recurrence_cpp.py`). "python" (default): ATen ops called from Python,
             on any device and dtype, nothing to build. "cpp": the loops compiled in C++ (`recurrence_cpp.py`),
             CPU only, float32/float64; built with `torch.utils.cpp_extension.load_inline` on first use (g++ and
-            ninja needed, 24-28 s once on 2 shared cores, then loaded from torch's extension directory), with an
+            ninja needed, 24-28 s once on 2 shared cores, then loaded from `recurrence_cpp.build_directory()`), with an
             error naming this flag if that fails. Error regression on CPU is dispatch-bound at batch 1 and runs
             ~1.6x faster with "cpp" (1.3x its matmul floor instead of 2.1x; docs/speed.md). "python" stays the
             default so that nothing needs a compiler; pass `--policy.recurrence_backend=cpp` for CPU evaluation.

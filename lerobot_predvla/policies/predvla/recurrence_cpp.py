@@ -8,16 +8,20 @@ instead of ~21 dispatched ATen ops. At batch 1 error regression is dominated by 
 The weight gradients after the loop are the Python path's (`recurrence.weight_gradients`).
 
 The extension is compiled with `torch.utils.cpp_extension.load_inline` on first use (g++ and ninja needed; 24-28 s on
-2 shared cores, then loaded from torch's extension directory) and logged once. It runs on CPU tensors in float32 or
-float64. tanh uses glibc's vector kernels (libmvec, AVX2, <= 4 ulp) where the CPU and C library have them, else
-std::tanh; the log line names which.
+2 shared cores, then loaded from `build_directory()`) and logged once. Builds are serialised by an OS file lock that
+dies with its holder, so an interrupted build never blocks the next one (`exclusive_build`). It runs on CPU tensors
+in float32 or float64. tanh uses glibc's vector kernels (libmvec, AVX2, <= 4 ulp) where the CPU and C library have
+them, else std::tanh; the log line names which.
 """
 
 import logging
 import os
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import cache
+from pathlib import Path
 from types import ModuleType
 
 import torch
@@ -394,6 +398,34 @@ std::vector<Tensor> backward(
 """
 
 
+def build_directory() -> Path:
+    """Where the extension is built: under `$TORCH_EXTENSIONS_DIR` (default `~/.cache/torch_extensions`), one folder
+    per Python and torch version (torch's own default separates Python versions only, not torch's ABI)."""
+    root = Path(os.environ.get("TORCH_EXTENSIONS_DIR") or Path.home() / ".cache" / "torch_extensions")
+    python = f"py{sys.version_info.major}{sys.version_info.minor}"
+    return root / f"{python}_torch{torch.__version__.replace('+', '_')}" / "predvla_recurrence"
+
+
+@contextmanager
+def exclusive_build(directory: Path) -> Iterator[None]:
+    """Holds an OS lock on `directory` while one process builds or loads the extension there.
+
+    torch's own lock (`<directory>/lock`, a `FileBaton`) is a plain file: a build killed midway leaves it behind and
+    every later build waits on it forever. `flock` is released by the OS when its holder dies, so the holder is the
+    only builder, and a `lock` file it finds was left by an interrupted build: it is removed, with a warning.
+    """
+    import fcntl  # POSIX only, like the g++ toolchain the extension needs
+
+    directory.mkdir(parents=True, exist_ok=True)
+    with open(directory / "predvla_build.flock", "w") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        stale = directory / "lock"
+        if stale.exists():
+            logging.warning("PredVLA: removing %s, left by an interrupted build of the C++ recurrence", stale)
+            stale.unlink()
+        yield
+
+
 @cache
 def extension() -> ModuleType:
     """Builds (first call in a fresh extension directory) or loads the compiled loops; logged once."""
@@ -405,11 +437,13 @@ def extension() -> ModuleType:
     if here not in os.environ.get("PATH", "").split(os.pathsep):
         os.environ["PATH"] = os.pathsep.join(filter(None, (here, os.environ.get("PATH"))))
     start = time.perf_counter()
+    directory = build_directory()
     try:
-        module = load_inline(
-            name="predvla_recurrence", cpp_sources=SOURCE, functions=["forward", "backward", "tanh_kernel"],
-            extra_cflags=["-O3"],
-        )
+        with exclusive_build(directory):
+            module = load_inline(
+                name="predvla_recurrence", cpp_sources=SOURCE, functions=["forward", "backward", "tanh_kernel"],
+                extra_cflags=["-O3"], build_directory=str(directory),
+            )
     except Exception as error:  # the compiler's, ninja's or the loader's error, whichever failed
         raise RuntimeError(
             "PredVLAConfig.recurrence_backend='cpp' needs the C++ recurrence built with "
@@ -418,8 +452,8 @@ def extension() -> ModuleType:
             f"{error}. Install them or use recurrence_backend='python' (same results)."
         ) from error
     logging.info(
-        "PredVLA: C++ recurrence (recurrence_backend='cpp') ready in %.1f s, tanh: %s",
-        time.perf_counter() - start, module.tanh_kernel(),
+        "PredVLA: C++ recurrence (recurrence_backend='cpp') ready in %.1f s (%s), tanh: %s",
+        time.perf_counter() - start, directory, module.tanh_kernel(),
     )
     return module
 
