@@ -11,7 +11,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from lerobot_predvla.libero.expert.motion import HALF_TURN_RULES
+from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
 
 
 def task_ids(text: str) -> list[int]:
@@ -40,7 +40,7 @@ def add_parser(subparsers) -> None:
                    help="std (rad) of Gaussian noise on the arm's initial joint angles at each reset (default 0: "
                    "LIBERO ControlEnv's fixed start). The benchmark's official init states carry robosuite's "
                    "default, 0.02; demonstrations without it never show the policy an arm that starts elsewhere")
-    p.add_argument("--half-turn", choices=HALF_TURN_RULES, default="nearest",
+    p.add_argument("--half-turn", choices=HALF_TURN_RULES, default=DEFAULT_HALF_TURN,
                    help="which of a finger direction and its half turn the expert grasps with: the one nearer the "
                    "current fingers (default; every recorded dataset) or the one leaving the wrist joint nearer the "
                    "middle of its range (one wrist branch per task also with --init-noise)")

@@ -23,7 +23,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
-from lerobot_predvla.libero.expert.motion import HALF_TURN_RULES
+from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
 from lerobot_predvla.utils.checkpoints import last_pretrained
 from lerobot_predvla.utils.io import atomic_write_json
@@ -184,7 +184,7 @@ class DataSpec:
     render_interval: int = 4
     demo_seed: int = 0
     init_noise: float = 0.0
-    half_turn: str = "nearest"
+    half_turn: str = DEFAULT_HALF_TURN
     vision_weights: str = "imagenet"
     language_from: str = "libero"
     frame_stride: int = 4

@@ -7,6 +7,7 @@ import numpy as np
 
 from lerobot_predvla.libero.env import fixture_poses, random_reset
 from lerobot_predvla.libero.expert import ExpertFailure, ScriptedExpert
+from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN
 
 SETTLE_STEPS = 5  # idle steps after reset so objects rest on their support (not recorded)
 IDLE = np.array([0, 0, 0, 0, 0, 0, -1.0])
@@ -34,7 +35,7 @@ def _model_xml(env, fixtures: dict[str, tuple[np.ndarray, np.ndarray]]) -> str:
     return ElementTree.tostring(root, encoding="unicode")
 
 
-def run_episode(env, seed: int, max_steps: int, half_turn: str = "nearest",
+def run_episode(env, seed: int, max_steps: int, half_turn: str = DEFAULT_HALF_TURN,
                 init_state: np.ndarray | None = None) -> Episode:
     """Randomised reset, then the scripted expert (`half_turn`: HALF_TURN_RULES) until success. With `init_state`
     (one of the benchmark's official evaluation init states) the episode starts there instead: only to measure the

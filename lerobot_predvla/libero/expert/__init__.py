@@ -8,6 +8,7 @@ import numpy as np
 
 from lerobot_predvla.libero.expert.articulate import Articulating
 from lerobot_predvla.libero.expert.motion import (
+    DEFAULT_HALF_TURN,
     HALF_TURN_RULES,
     MAX_FINGER_SPAN,
     MIN_GRASP_HEIGHT,
@@ -27,7 +28,7 @@ class ScriptedExpert(Placing, Pushing, Articulating):
     """Solves LIBERO goals (`In`, `On`, `Open`, `Close`, `Turnon`); call `act()` once per control step."""
 
     def __init__(self, env, speed: float = 1.0, rng: np.random.Generator | None = None,
-                 half_turn: str = "nearest") -> None:
+                 half_turn: str = DEFAULT_HALF_TURN) -> None:
         if half_turn not in HALF_TURN_RULES:
             raise ValueError(f"half_turn must be one of {HALF_TURN_RULES}, got {half_turn!r}")
         self.half_turn = half_turn

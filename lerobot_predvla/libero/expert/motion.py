@@ -26,6 +26,7 @@ SKILL_ORDER = {"open": 0, "turnon": 0, "in": 1, "on": 1, "close": 2}  # plan ord
 #   decides, and demonstrations of one task end on wrist angles half a turn apart (docs/libero_object_cpu.md).
 # "wrist_centre": the one that leaves the wrist joint nearer the middle of its range; ties are far from the start.
 HALF_TURN_RULES = ("nearest", "wrist_centre")
+DEFAULT_HALF_TURN = "nearest"  # every recorded dataset; "wrist_centre" fails two libero_goal tasks (docs/libero.md)
 
 Skill = Iterator[np.ndarray]
 
