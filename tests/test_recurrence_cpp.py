@@ -59,7 +59,7 @@ def test_a_build_killed_midway_does_not_block_the_next(tmp_path, caplog):
 def test_the_build_directory_is_per_python_and_torch_version(monkeypatch, tmp_path):
     monkeypatch.setenv("TORCH_EXTENSIONS_DIR", str(tmp_path))
     directory = recurrence_cpp.build_directory()
-    assert directory.parent.parent == tmp_path and directory.name == "predvla_recurrence"
+    assert directory.parent.parent == tmp_path and directory.name == recurrence_cpp.EXTENSION_NAME
     assert torch.__version__.split("+")[0] in directory.parent.name
 
 

@@ -398,12 +398,15 @@ std::vector<Tensor> backward(
 """
 
 
+EXTENSION_NAME = "predvla_recurrence"
+
+
 def build_directory() -> Path:
     """Where the extension is built: under `$TORCH_EXTENSIONS_DIR` (default `~/.cache/torch_extensions`), one folder
     per Python and torch version (torch's own default separates Python versions only, not torch's ABI)."""
     root = Path(os.environ.get("TORCH_EXTENSIONS_DIR") or Path.home() / ".cache" / "torch_extensions")
     python = f"py{sys.version_info.major}{sys.version_info.minor}"
-    return root / f"{python}_torch{torch.__version__.replace('+', '_')}" / "predvla_recurrence"
+    return root / f"{python}_torch{torch.__version__.replace('+', '_')}" / EXTENSION_NAME
 
 
 @contextmanager
@@ -441,7 +444,7 @@ def extension() -> ModuleType:
     try:
         with exclusive_build(directory):
             module = load_inline(
-                name="predvla_recurrence", cpp_sources=SOURCE, functions=["forward", "backward", "tanh_kernel"],
+                name=EXTENSION_NAME, cpp_sources=SOURCE, functions=["forward", "backward", "tanh_kernel"],
                 extra_cflags=["-O3"], build_directory=str(directory),
             )
     except Exception as error:  # the compiler's, ninja's or the loader's error, whichever failed
