@@ -54,7 +54,8 @@ def run(policy, observations: list[dict]) -> torch.Tensor:
         return torch.stack([policy.select_action(o) for o in observations])
 
 
-CPU_RECIPES = {"predvla_cpu"}  # named CPU recipes beside the paper's rows (docs/libero_object_cpu.md)
+# Named CPU recipes beside the paper's rows (docs/libero_object_cpu.md).
+CPU_RECIPES = {"predvla_cpu", "predvla_cpu_lambda_q100"}
 
 
 def test_every_table_row_has_a_config():
@@ -67,6 +68,16 @@ def test_cpu_recipe_keeps_the_paper_architecture():
     assert count_parameters(get_policy_class(config.type)(config)) == PAPER_PARAMETERS["predvla"][0]
     assert config.complexity_weights == (0.05, 0.02, 0.02, 0.01) and config.optimizer_lr == 1e-3
     assert config.open_loop_weight == 1.0 and PredVLAConfig().open_loop_weight == 0.0
+
+
+def test_proprioceptive_recipe_departs_in_the_training_weight_only():
+    """predvla_cpu_lambda_q100 is the CPU recipe with lambda_q = 100 in training (Eq. 10; Table 2: 1) and Table 2's
+    er_lambda_q = 1 in error regression: every other field as predvla_cpu.json."""
+    recipe, base = preset("predvla_cpu_lambda_q100"), preset("predvla_cpu")
+    assert (recipe.lambda_q, recipe.er_lambda_q) == (100.0, 1.0) == (100.0, PredVLAConfig().er_lambda_q)
+    assert PredVLAConfig().lambda_q == base.lambda_q == 1.0
+    assert {**vars(recipe), "lambda_q": base.lambda_q} == vars(base)
+    assert count_parameters(get_policy_class(recipe.type)(recipe)) == PAPER_PARAMETERS["predvla"][0]
 
 
 @pytest.mark.parametrize("name", sorted(PAPER_PARAMETERS))

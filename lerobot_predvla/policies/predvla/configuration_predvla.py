@@ -60,7 +60,10 @@ class PredVLAConfig(CachedFeaturesConfig):
             LeRobot's `cosine_decay_with_warmup`, no warm-up); `posterior_lr` stays constant. An option for
             experiments (docs/libero_object_cpu.md measures a cool-down with it).
         lambda_v: Weight of the visual prediction error (Eq. 10; Table 2: 1).
-        lambda_q: Weight of the proprioceptive prediction error (Eq. 10; Table 2: 1).
+        lambda_q: Weight of the proprioceptive prediction error (Eq. 10; Table 2: 1). Proprioception is raw radians,
+            so at 1 its error is tiny against the complexity term; the CPU recipe
+            `configs/policy/predvla_cpu_lambda_q100.json` trains with 100 (about one over the joint angles' variance)
+            and keeps `er_lambda_q` at 1 (docs/libero_object_cpu.md).
         lambda_a: Weight of the action negative log-likelihood (Eq. 10; Table 2: 1).
         complexity_weights: w_l of (T, V, A_top, A_bottom) in the training complexity term (Eq. 8;
             Table 2: (0.05, 0.02, 0.02, 0.01)).
