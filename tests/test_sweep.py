@@ -142,6 +142,24 @@ def test_killed_training_resumes_and_killed_eval_is_redone(tmp_path):
     assert json.loads((runner.train_dir("predvla", "libero_object", 0) / TRAIN_DONE_FILE).read_text())["resumed"]
 
 
+def test_a_later_call_with_other_seeds_adds_to_the_plan(tmp_path):
+    """`--seeds 1` after a seed-0 sweep plans seed 1 beside seed 0, so the report still knows both."""
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"])
+    Runner(Sweep.load(path), tmp_path / "runs", execute=FakeLeRobot()).run(progress=False)
+    later = Sweep.load(path)
+    later.settings.seeds = [1]  # what `predvla sweep --seeds 1` does
+    Runner(later, tmp_path / "runs", execute=FakeLeRobot()).run(configs=["predvla"], progress=False)
+    plan = json.loads((tmp_path / "runs/plan.json").read_text())
+    assert sorted((r["config"], r["seed"]) for r in plan["runs"]) == [
+        ("A6", 0), ("A6", 1), ("L3", 0), ("L3", 1), ("predvla", 0), ("predvla", 1)]
+    summary = write_report(tmp_path / "runs", tmp_path / "report")
+    assert sorted(summary["missing_runs"]) == ["A6/libero_object/seed1", "L3/libero_object/seed1"]
+
+    (tmp_path / "runs/plan.json").write_text("{not json")
+    with pytest.raises(SweepError, match="plan.json"):
+        Runner(later, tmp_path / "runs", execute=FakeLeRobot()).run(progress=False)
+
+
 def test_shards_partition_training_units(tmp_path):
     sweep = Sweep.load(sweep_file(tmp_path))
     shards = [Runner(sweep, tmp_path / "runs").shard_units(None, (i, 3)) for i in range(3)]

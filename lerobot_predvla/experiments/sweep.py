@@ -537,8 +537,20 @@ class Runner:
 
     # ----- running ----------------------------------------------------------------------------------------
     def write_plan(self, runs: list[Run]) -> None:
-        """`plan.json`: every run of the sweep and its configuration, so the report can mark missing runs."""
-        atomic_write_json(self.runs_dir / "plan.json", {
+        """`plan.json`: every run of the sweep and its configuration, so the report can mark missing runs.
+
+        The runs already planned in RUNS_DIR are kept (those of configurations the sweep file still has): a later
+        call restricted by `--seeds`, `--suites` or `--configs` adds its runs instead of replacing the plan.
+        """
+        path = self.runs_dir / "plan.json"
+        try:
+            earlier = json.loads(path.read_text())["runs"] if path.is_file() else []
+            planned = [Run(**r) for r in earlier if r["config"] in self.sweep.configs]
+        except (ValueError, KeyError, TypeError) as err:
+            raise SweepError(f"{path}: expected a sweep plan with a list of runs {{config, suite, seed}} ({err}); "
+                             "delete it to plan from the sweep file alone") from err
+        runs = planned + [r for r in runs if r not in planned]
+        atomic_write_json(path, {
             "runs": [asdict(r) for r in runs],
             "configs": {name: asdict(spec) for name, spec in self.sweep.configs.items()},
             "protocol": {"n_episodes": self.sweep.settings.n_episodes,
