@@ -120,6 +120,10 @@ def test_lerobot_train_push_uses_predvla_card_and_never_posteriors(trained_and_p
     assert "- predictive-coding" in card and "library_name: lerobot" in card
     assert "675,732" in card and "local/predvla_synthetic" in card
     assert "$" not in card and "{{" not in card
+    training_machine = json.loads((checkpoint / "train_config.json").read_text())
+    for name in ("README.md", "config.json", "train_config.json"):  # the Hub gets no path of the training machine
+        text = (snapshot / name).read_text()
+        assert training_machine["output_dir"] not in text and training_machine["dataset"]["root"] not in text, name
 
 
 def test_snapshot_reproduces_actions_exactly(trained_and_pushed, synthetic_dataset):
@@ -182,6 +186,12 @@ def test_predvla_push_publishes_exactly_the_checkpoint_files(trained_and_pushed,
     ):
         assert value in card, value
     assert "$" not in card and "{{" not in card and "}}" not in card
+    trained = json.loads((checkpoint / "train_config.json").read_text())
+    assert trained["dataset"]["root"] and trained["output_dir"]  # the checkpoint names the training machine's paths
+    config, train_config = json.loads(published["config.json"]), json.loads(published["train_config.json"])
+    assert config["frontend_dir"] is None and train_config["policy"]["frontend_dir"] is None
+    assert train_config["dataset"]["root"] is None and train_config["output_dir"] is None
+    assert trained["dataset"]["root"] not in card and trained["output_dir"] not in card
 
 
 def test_push_rejects_a_directory_without_weights(tmp_path, capsys):

@@ -1,7 +1,6 @@
 """`predvla push`: publish a saved checkpoint of any policy type of the plugin on the Hugging Face Hub with its card."""
 
 import argparse
-import json
 import shutil
 import sys
 import tempfile
@@ -56,8 +55,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def write_snapshot(files: dict[str, Path | bytes], out: Path) -> None:
-    """The published files in a new directory, written beside it first and renamed into place. The training
-    machine's paths (the dataset, the front-end directory, the output directory) are cleared from the configs."""
+    """The published files (configs without the training machine's paths) in a new directory, written beside it
+    first and renamed into place."""
     if out.exists():
         raise FileExistsError(f"--out {out} exists; choose a new directory.")
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -70,15 +69,6 @@ def write_snapshot(files: dict[str, Path | bytes], out: Path) -> None:
                 target.write_bytes(source)
             else:
                 shutil.copyfile(source, target)
-        config = staging / "config.json"
-        if config.is_file():
-            config.write_text(json.dumps({**json.loads(config.read_text()), "frontend_dir": None}, indent=4))
-        train_config = staging / "train_config.json"
-        if train_config.is_file():
-            cfg = json.loads(train_config.read_text())
-            cfg["dataset"]["root"], cfg["output_dir"] = None, None
-            cfg["policy"]["frontend_dir"] = None
-            train_config.write_text(json.dumps(cfg, indent=4))
         staging.rename(out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)

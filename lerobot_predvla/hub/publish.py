@@ -113,12 +113,40 @@ def frontend_source(pretrained: Path, dataset_root: Path | None, override: Path 
     return None
 
 
-def frontend_metadata(files: dict[str, Path]) -> dict | None:
+def read_json(files: dict[str, Path | bytes], name: str) -> dict:
+    """A JSON file about to be published, from its path or from the bytes that replace it."""
+    source = files[name]
+    return json.loads(source if isinstance(source, bytes) else source.read_text())
+
+
+def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
+    """The files as every route publishes them: the training machine's paths cleared from the configs.
+
+    `frontend_dir` (the artefact is published beside the weights and inside the preprocessor), the dataset root and
+    the output directory name places on the training machine only; loading ignores them once they are None.
+    """
+    published: dict[str, Path | bytes] = dict(files)
+    if "config.json" in files:
+        config = read_json(files, "config.json")
+        if "frontend_dir" in config:
+            published["config.json"] = json.dumps({**config, "frontend_dir": None}, indent=4).encode()
+    if "train_config.json" in files:
+        train_cfg = read_json(files, "train_config.json")
+        train_cfg["output_dir"] = None
+        if isinstance(train_cfg.get("dataset"), dict):
+            train_cfg["dataset"]["root"] = None
+        if isinstance(train_cfg.get("policy"), dict) and "frontend_dir" in train_cfg["policy"]:
+            train_cfg["policy"]["frontend_dir"] = None
+        published["train_config.json"] = json.dumps(train_cfg, indent=4).encode()
+    return published
+
+
+def frontend_metadata(files: dict[str, Path | bytes]) -> dict | None:
     """The artefact's `frontend.json`, from the published folder or from the preprocessor's front-end step."""
     if f"{FRONTEND_DIR}/{METADATA_FILE}" in files:
-        return json.loads(files[f"{FRONTEND_DIR}/{METADATA_FILE}"].read_text())
+        return read_json(files, f"{FRONTEND_DIR}/{METADATA_FILE}")
     if "policy_preprocessor.json" in files:
-        for step in json.loads(files["policy_preprocessor.json"].read_text()).get("steps", []):
+        for step in read_json(files, "policy_preprocessor.json").get("steps", []):
             if step.get("registry_name") == FRONTEND_STEP and step.get("config", {}).get("artefact"):
                 return step["config"]["artefact"]
     return None
@@ -334,15 +362,15 @@ def _model_section(config: dict) -> dict[str, str]:
 
 
 def render_card(
-    files: dict[str, Path],
+    files: dict[str, Path | bytes],
     repo_id: str,
     dataset: DatasetSummary | None = None,
     report: Path | None = None,
     report_config: str | None = None,
 ) -> str:
     """The model card for the files about to be published, with every value filled in."""
-    config = json.loads(files["config.json"].read_text())
-    train_cfg = json.loads(files["train_config.json"].read_text()) if "train_config.json" in files else None
+    config = read_json(files, "config.json")
+    train_cfg = read_json(files, "train_config.json") if "train_config.json" in files else None
     dataset_repo_id = dataset.repo_id if dataset else (train_cfg["dataset"]["repo_id"] if train_cfg else "unknown")
     frontend_section, pca_values = _frontend_section(frontend_metadata(files))
     _policy_type(config, files["config.json"])
@@ -436,8 +464,8 @@ def push_checkpoint(
     if dataset_root is not None and "train_config.json" in files:
         repo = json.loads(files["train_config.json"].read_text())["dataset"]["repo_id"]
         dataset = DatasetSummary.from_root(repo, dataset_root)
-    card = render_card(files, repo_id, dataset, report, report_config)
-    published: dict[str, Path | bytes] = {**files, CARD_FILE: card.encode()}
+    published = without_machine_paths(files)
+    published[CARD_FILE] = render_card(published, repo_id, dataset, report, report_config).encode()
     if dry_run:
         return published, None
     return published, upload_files(published, repo_id, private, "Upload PredVLA policy, processors, front end, card")
@@ -460,7 +488,7 @@ def push_policy(
         source = frontend_source(stage, root, None)
         if source is not None and source != stage / FRONTEND_DIR:
             shutil.copytree(source, stage / FRONTEND_DIR, ignore=shutil.ignore_patterns(".*"))
-        files = publishable_files(stage)
+        published = without_machine_paths(publishable_files(stage))
         dataset = DatasetSummary.from_meta(dataset_meta) if dataset_meta is not None else None
-        published = {**files, CARD_FILE: render_card(files, repo_id, dataset).encode()}
+        published[CARD_FILE] = render_card(published, repo_id, dataset).encode()
         return upload_files(published, repo_id, private, "Upload PredVLA policy weights, train config, front end, card")

@@ -130,14 +130,15 @@ class PredVLAPolicy(PreTrainedPolicy):
         """PredVLA's card (`hub/predvla_card.md`) instead of LeRobot's generic one (same signature)."""
         from huggingface_hub import ModelCard
 
-        from lerobot_predvla.hub.publish import DatasetSummary, publishable_files, render_card
+        from lerobot_predvla.hub.publish import DatasetSummary, publishable_files, render_card, without_machine_paths
 
         with tempfile.TemporaryDirectory() as tmp:
             self._without_posteriors(self.save_pretrained, Path(tmp))
             if cfg is not None:
                 cfg.save_pretrained(Path(tmp))
             dataset = DatasetSummary.from_meta(dataset_meta) if dataset_meta is not None else None
-            return ModelCard(render_card(publishable_files(Path(tmp)), self.config.repo_id or "local", dataset))
+            files = without_machine_paths(publishable_files(Path(tmp)))
+            return ModelCard(render_card(files, self.config.repo_id or "local", dataset))
 
     def _without_posteriors(self, fn, *args, **kwargs):
         self._write_posteriors = False  # the Hub gets the controller, never the training posteriors
