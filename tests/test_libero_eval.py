@@ -88,6 +88,32 @@ def test_lerobot_eval_runs_predvla_on_libero(checkpoint, tmp_path, env_type):
     assert 0.0 <= info["overall"]["pc_success"] <= 100.0
 
 
+def test_predvla_trace_records_error_regression_in_the_simulator(checkpoint, tmp_path):
+    """`predvla trace`: lerobot-eval run for real, every control step traced, a figure beside an earlier trace."""
+    eval_args = [f"--policy.path={checkpoint}", "--env.type=predvla_libero", f"--env.task={SUITE}",
+                 "--env.task_ids=[0]", f"--env.episode_length={EPISODE_STEPS}", "--eval.n_episodes=2",
+                 "--eval.batch_size=2", "--eval.use_async_envs=false", "--policy.device=cpu"]
+    predvla = str(BIN / "predvla")
+    run([predvla, "trace", str(tmp_path / "er"), *eval_args])
+    trace = json.loads((tmp_path / "er" / "trace.json").read_text())
+    assert len(trace["episodes"]) == 2 and (tmp_path / "er" / "eval" / "eval_info.json").is_file()
+    for episode in trace["episodes"]:
+        assert episode["steps"] == list(range(1, EPISODE_STEPS + 1))
+        assert np.isfinite(episode["action"]).all() and np.shape(episode["action"]) == (EPISODE_STEPS, 7)
+        moves = np.array(episode["move_newest"])
+        assert moves.shape == (EPISODE_STEPS, 4) and np.isfinite(moves).all() and (moves > 0).any()
+
+    log = run([predvla, "trace", "--episode", "1", "--compare", str(tmp_path / "er"), str(tmp_path / "open_loop"),
+               *eval_args, "--policy.er_iterations=0"])
+    open_loop = json.loads((tmp_path / "open_loop" / "trace.json").read_text())["episodes"][1]
+    assert "move_newest" not in open_loop and open_loop["action"] == open_loop["prior_action"]
+    assert (tmp_path / "open_loop" / "trace.png").stat().st_size > 0, log[-2000:]
+
+    bad = subprocess.run([predvla, "trace", "--compare", str(tmp_path), str(tmp_path / "x"), *eval_args],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and f"--compare {tmp_path}" in bad.stderr and not (tmp_path / "x").exists()
+
+
 def test_predvla_libero_env_observations():
     """Fresh images every 4th step equal the demonstrations' render of the same state; proprio is joints+gripper."""
     from lerobot.envs.utils import preprocess_observation

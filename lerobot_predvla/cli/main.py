@@ -16,6 +16,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.cli.fit_frontend",
     "lerobot_predvla.cli.convert",
     "lerobot_predvla.cli.inspect",
+    "lerobot_predvla.cli.trace",
     "lerobot_predvla.cli.sweep",
     "lerobot_predvla.cli.report",
     "lerobot_predvla.cli.push",

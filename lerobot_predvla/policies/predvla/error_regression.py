@@ -13,6 +13,7 @@ update (its prediction for this step), and `prior_action` holds the open-loop ac
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import ClassVar
 
 import torch
 from torch import Tensor
@@ -58,7 +59,13 @@ class ErrorRegression:
 
     `rollout` defaults to the model's fused `PredictiveModel.rollout`; any callable with its signature fits
     (the benchmarks pass the eager reference).
+
+    `tracer`, when set, is called after every control step with this object, the window's posteriors before
+    the step's Adam iterations (None in exact open loop) and the action returned; `predvla trace` sets it to record
+    acting in the simulator. It reads and never changes anything.
     """
+
+    tracer: ClassVar[Callable[["ErrorRegression", Tensor | None, Tensor], None] | None] = None
 
     def __init__(self, model: PredictiveModel, rollout: Callable[..., Trajectory] | None = None):
         self.model = model
@@ -96,9 +103,15 @@ class ErrorRegression:
         """One control step for a batch; returns the action (batch, action_dim) in normalised units."""
         open_loop_action = self.observe(language, vision, proprio, vision_available, proprio_available)
         if open_loop_action is not None:
+            if self.tracer is not None:
+                self.tracer(self, None, open_loop_action)
             return open_loop_action
+        before = torch.stack(self.posteriors) if self.tracer is not None else None
         self.infer()
-        return self.act()
+        action = self.act()
+        if self.tracer is not None:
+            self.tracer(self, before, action)
+        return action
 
     def observe(
         self, language: Tensor, vision: Tensor, proprio: Tensor,

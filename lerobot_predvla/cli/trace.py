@@ -1,0 +1,92 @@
+"""`predvla trace`: `lerobot-eval` of a PredVLA checkpoint with error regression traced step by step.
+
+Every argument after OUT goes to lerobot-eval unchanged (its `--output_dir` defaults to OUT/eval). Writes
+OUT/trace.json (the lerobot-eval arguments and, per episode in lerobot-eval's order, per control step: the
+action, the prior chain's action and how far error regression moved each module's posteriors) and OUT/trace.png
+(episode --episode of this run, beside the same episode of every --compare trace). lerobot-eval steps every
+environment of a batch until the last one ends, so an episode's trace runs past its own end; eval_info.json in the
+output directory says which episodes succeeded. Example (seed 1 against seed 0 of the same recipe, one reset):
+
+  predvla trace outputs/trace_seed0 --policy.path=checkpoints/predvla_libero_object_lambda_q100 \\
+    --policy.device=cpu --env.type=predvla_libero --env.task=libero_object --env.task_ids=[7] \\
+    --env.episode_length=280 --env.init_states=false --seed=1000 --eval.n_episodes=2 --eval.batch_size=2
+  predvla trace --episode 1 --compare outputs/trace_seed0 outputs/trace_seed1 \\
+    --policy.path=checkpoints/predvla_libero_object_lambda_q100_seed1 ...(the same arguments)
+"""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+TRACE_FILE = "trace.json"
+FIGURE_FILE = "trace.png"
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("trace", help="lerobot-eval with error regression traced per step, and a plot",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--episode", type=int, default=0, help="episode drawn in trace.png (lerobot-eval's order)")
+    p.add_argument("--compare", type=Path, action="append", default=[], metavar="DIR",
+                   help="OUT of an earlier trace to draw beside this one (repeatable)")
+    p.add_argument("out", type=Path, help="output directory (trace.json, trace.png, eval/)")
+    p.add_argument("eval_args", nargs=argparse.REMAINDER, help="lerobot-eval arguments (--policy.path=... etc.)")
+    p.set_defaults(func=run)
+
+
+def load_trace(directory: Path) -> dict:
+    path = directory / TRACE_FILE
+    try:
+        trace = json.loads(path.read_text())
+        if not isinstance(trace.get("episodes"), list):
+            raise ValueError("no list of episodes")
+    except (OSError, ValueError, AttributeError) as err:
+        raise ValueError(f"--compare {directory}: expected a trace of `predvla trace` at {path} ({err}).") from err
+    return trace
+
+
+def run(args: argparse.Namespace) -> int:
+    from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
+    from lerobot_predvla.policies.predvla.trace import TraceRecorder, plot_traces
+    from lerobot_predvla.utils.io import atomic_write_json
+
+    try:
+        if args.episode < 0:
+            raise ValueError(f"--episode must be >= 0, got {args.episode}.")
+        if not any(a.startswith("--policy.path") for a in args.eval_args):
+            raise ValueError("lerobot-eval needs --policy.path=CHECKPOINT after OUT.")
+        compared = {d.name: load_trace(d) for d in args.compare}
+    except ValueError as err:
+        print(f"predvla trace: error: {err}", file=sys.stderr)
+        return 2
+    from lerobot.scripts.lerobot_eval import main as lerobot_eval
+
+    eval_args = list(args.eval_args)
+    if not any(a.startswith("--output_dir") for a in eval_args):
+        eval_args.append(f"--output_dir={args.out / 'eval'}")
+    recorder, argv = TraceRecorder(), sys.argv
+    ErrorRegression.tracer, sys.argv = recorder, ["lerobot-eval", *eval_args]
+    try:
+        lerobot_eval()
+    except SystemExit as exit_:
+        if exit_.code:
+            print(f"predvla trace: lerobot-eval stopped (exit {exit_.code}); nothing written", file=sys.stderr)
+            return int(exit_.code) if isinstance(exit_.code, int) else 2
+    finally:
+        ErrorRegression.tracer, sys.argv = None, argv
+    episodes = recorder.episodes()
+    if not episodes:
+        print("predvla trace: error: no step of error regression was recorded; is --policy.path a PredVLA "
+              "checkpoint?", file=sys.stderr)
+        return 2
+    trace = {"eval_args": eval_args, "episodes": episodes}
+    args.out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(args.out / TRACE_FILE, trace)
+    try:
+        plot_traces({args.out.name: trace, **compared}, args.episode, args.out / FIGURE_FILE)
+    except ValueError as err:
+        print(f"predvla trace: error: {err} ({TRACE_FILE} is written)", file=sys.stderr)
+        return 2
+    print(f"predvla trace: {len(episodes)} episodes, {len(episodes[0]['steps'])} steps each; "
+          f"{args.out / TRACE_FILE}, {args.out / FIGURE_FILE}")
+    return 0
