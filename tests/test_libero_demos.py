@@ -145,6 +145,21 @@ def test_wrist_centre_half_turn_keeps_one_wrist_branch_under_start_noise(libero)
     assert abs(ends["wrist_centre", 1000] - ends["wrist_centre", 1002]) < 0.3, ends
 
 
+def test_hold_steps_record_the_arm_waiting_after_success(libero):
+    """`--hold-steps`: the same episode, then idle steps (arm still, gripper open) with the object staying put."""
+    env_mod, _ = libero
+    from lerobot_predvla.libero.rollout import IDLE, run_episode
+
+    env = env_mod.make_env(env_mod.task_spec(SUITE, 0))
+    plain = run_episode(env, 1000, max_steps=280)
+    held = run_episode(env, 1000, max_steps=280, hold_steps=6)
+    assert plain.success and held.success and env.check_success()  # still in the basket after the holds
+    env.close()
+    n = len(plain.actions)
+    assert held.actions.shape == (n + 6, 7) and np.array_equal(held.actions[:n], plain.actions)
+    assert np.array_equal(held.actions[n:], np.tile(IDLE, (6, 1))) and len(held.states) == n + 6
+
+
 def test_expert_success_from_the_official_init_states(libero):
     """`predvla demos --no-render --official-init-states` measures the expert where the policies are evaluated:
     attempt k starts from official init state k (the arm's joint noise included). Recording from them is refused."""

@@ -44,6 +44,10 @@ def add_parser(subparsers) -> None:
                    help="which of a finger direction and its half turn the expert grasps with: the one nearer the "
                    "current fingers (default; every recorded dataset) or the one leaving the wrist joint nearer the "
                    "middle of its range (one wrist branch per task also with --init-noise)")
+    p.add_argument("--hold-steps", type=int, default=0,
+                   help="idle steps (arm still, gripper open) recorded after each success (default 0: episodes end "
+                   "at success, as LIBERO's). A policy rolled out past the demonstrations' end acts untrained; with "
+                   "holds it learns to wait while a released object settles")
     p.add_argument("--official-init-states", action="store_true",
                    help="with --no-render only: start attempt k from the benchmark's official init state k instead "
                    "of a randomised reset, to measure the expert where the policies are evaluated (demonstrations "
@@ -69,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit("--render-interval must be >= 1")
     if args.init_noise < 0:
         raise SystemExit(f"--init-noise must be >= 0, got {args.init_noise}")
+    if args.hold_steps < 0:
+        raise SystemExit(f"--hold-steps must be >= 0, got {args.hold_steps}")
     if args.official_init_states and not args.no_render:
         raise SystemExit("--official-init-states only measures expert success: pass --no-render with it "
                          "(demonstrations never start from the evaluation init states)")
@@ -88,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
             while len(kept) < args.per_task and attempts < max_attempts:
                 start = None if init_states is None else init_states[attempts % len(init_states)]
                 episode = run_episode(env, episode_seed(args.seed, task_id, attempts), max_steps, args.half_turn,
-                                      init_state=start)
+                                      init_state=start, hold_steps=args.hold_steps)
                 attempts += 1
                 if episode.success:
                     kept.append(episode)
@@ -103,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
             render_env = make_env(spec, render=True)
             random_reset(render_env, 0)
             attrs = {**file_attrs(spec, render_env, args.init_noise), "predvla_render_interval": args.render_interval,
-                     "predvla_half_turn": args.half_turn}
+                     "predvla_half_turn": args.half_turn, "predvla_hold_steps": args.hold_steps}
             for episode in tqdm(kept, desc=f"{args.suite}/{task_id} rendering", unit="demo"):
                 obs = replay_observations(render_env, episode, args.render_interval)
                 demos.append({**obs, "actions": episode.actions, "states": episode.states,

@@ -171,6 +171,8 @@ class DataSpec:
         half_turn: Which of a finger direction and its half turn the expert grasps with (`predvla demos
             --half-turn`): 'nearest' (the current fingers') or 'wrist_centre' (the wrist joint nearer the middle of
             its range: one wrist branch per task also with init_noise).
+        hold_steps: Idle steps (arm still, gripper open) recorded after each demonstration's success (`predvla demos
+            --hold-steps`; 0: episodes end at success, as LIBERO's).
         vision_weights: ResNet18 weights of the front end ('imagenet', a .pth file, or 'random': the offline
             substitute, printed as such).
         language_from: Instructions of the language PCA: 'libero' (all 40 of the task list, Section 4.1) or 'demos'.
@@ -185,6 +187,7 @@ class DataSpec:
     demo_seed: int = 0
     init_noise: float = 0.0
     half_turn: str = DEFAULT_HALF_TURN
+    hold_steps: int = 0
     vision_weights: str = "imagenet"
     language_from: str = "libero"
     frame_stride: int = 4
@@ -255,6 +258,8 @@ class Sweep:
             if spec.half_turn not in HALF_TURN_RULES:
                 raise SweepError(f"{path}: data.{suite}.half_turn must be one of {HALF_TURN_RULES}, "
                                  f"got {spec.half_turn!r}.")
+            if spec.hold_steps < 0:
+                raise SweepError(f"{path}: data.{suite}.hold_steps must be >= 0, got {spec.hold_steps}.")
         sweep = cls(settings, {}, path.parent)
         for spec in configs:
             if spec.name in sweep.configs:
@@ -500,7 +505,8 @@ class Runner:
             commands.append(("demos", [*predvla, "demos", "--suite", suite, "--tasks", ",".join(map(str, missing)),
                                        "--per-task", str(spec.per_task), "--render-interval", str(spec.render_interval),
                                        "--seed", str(spec.demo_seed), "--init-noise", str(spec.init_noise),
-                                       "--half-turn", spec.half_turn, "--out", str(hdf5)]))
+                                       "--half-turn", spec.half_turn, "--hold-steps", str(spec.hold_steps),
+                                       "--out", str(hdf5)]))
         if not (frontend / "metadata.json").is_file():
             commands.append(("frontend", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", suite,
                                           "--vision-weights", spec.vision_weights, "--language-from",

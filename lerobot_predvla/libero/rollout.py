@@ -36,10 +36,11 @@ def _model_xml(env, fixtures: dict[str, tuple[np.ndarray, np.ndarray]]) -> str:
 
 
 def run_episode(env, seed: int, max_steps: int, half_turn: str = DEFAULT_HALF_TURN,
-                init_state: np.ndarray | None = None) -> Episode:
-    """Randomised reset, then the scripted expert (`half_turn`: HALF_TURN_RULES) until success. With `init_state`
-    (one of the benchmark's official evaluation init states) the episode starts there instead: only to measure the
-    expert's success where the policies are evaluated, never to record demonstrations."""
+                init_state: np.ndarray | None = None, hold_steps: int = 0) -> Episode:
+    """Randomised reset, then the scripted expert (`half_turn`: HALF_TURN_RULES) until success, then `hold_steps`
+    idle steps (arm still, gripper open) recorded after it. With `init_state` (one of the benchmark's official
+    evaluation init states) the episode starts there instead: only to measure the expert's success where the
+    policies are evaluated, never to record demonstrations."""
     if init_state is None:
         random_reset(env, seed)
     else:
@@ -57,6 +58,10 @@ def run_episode(env, seed: int, max_steps: int, half_turn: str = DEFAULT_HALF_TU
             env.step(actions[-1])
             if env.check_success():
                 success = True
+                for _ in range(hold_steps):  # what follows success, which a policy otherwise never sees
+                    states.append(env.get_sim_state())
+                    actions.append(IDLE)
+                    env.step(IDLE)
                 break
             if expert.done:
                 note = "plan ended without success"
