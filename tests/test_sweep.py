@@ -349,12 +349,13 @@ def test_the_libero_object_cpu_sweep_file_is_valid(tmp_path):
 
 
 def test_the_init_noise_sweep_records_demonstrations_that_start_like_the_official_init_states(tmp_path):
-    """The arm's initial joint noise and the half-turn rule reach `predvla demos`; libero_object_cpu.yaml keeps the
-    fixed start."""
+    """The arm's initial joint noise, the half-turn rule and the holds after success reach `predvla demos`;
+    libero_object_cpu.yaml keeps the fixed start."""
     sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
-    for name, noise, half_turn in (("libero_object_cpu_init_noise.yaml", "0.02", "nearest"),
-                                   ("libero_object_cpu_init_noise_wrist.yaml", "0.02", "wrist_centre"),
-                                   ("libero_object_cpu.yaml", "0.0", "nearest")):
+    for name, noise, half_turn, hold in (("libero_object_cpu_init_noise.yaml", "0.02", "nearest", "0"),
+                                         ("libero_object_cpu_init_noise_wrist.yaml", "0.02", "wrist_centre", "0"),
+                                         ("libero_object_cpu_hold.yaml", "0.02", "wrist_centre", "40"),
+                                         ("libero_object_cpu.yaml", "0.0", "nearest", "0")):
         sweep = Sweep.load(sweeps / name)
         spec = sweep.settings.data["libero_object"]  # outputs in tmp_path: nothing made on this machine counts
         spec.hdf5, spec.frontend = str(tmp_path / name / "hdf5"), str(tmp_path / name / "frontend")
@@ -362,6 +363,7 @@ def test_the_init_noise_sweep_records_demonstrations_that_start_like_the_officia
         stage, command = Runner(sweep, tmp_path).data_commands("libero_object")[0]
         assert stage == "demos" and command[command.index("--init-noise") + 1] == noise
         assert command[command.index("--half-turn") + 1] == half_turn
+        assert command[command.index("--hold-steps") + 1] == hold
 
 
 def test_paper_sweep_reads_every_policy_file():
