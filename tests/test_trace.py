@@ -1,6 +1,7 @@
 """The error-regression tracer (`predvla trace`) reads the steps of `ErrorRegression` and changes none of them."""
 
 import dataclasses
+import json
 
 import torch
 
@@ -53,3 +54,21 @@ def test_open_loop_is_traced_without_moves_and_batches_split_into_episodes():
     assert len(episodes) == 5 and all(ep["steps"] == [1, 2, 3, 4] for ep in episodes)
     assert "move_newest" not in episodes[0] and episodes[0]["action"] == episodes[0]["prior_action"]
     assert torch.equal(torch.tensor(episodes[-1]["action"]), actions[:, -1])
+
+
+def test_trace_command_refuses_bad_requests_before_running_anything(tmp_path, capsys):
+    from lerobot_predvla.cli.main import main as predvla_main
+
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    (earlier / "trace.json").write_text(json.dumps({"eval_args": [], "episodes": [{"steps": [1]}] * 2}))
+    cases = {
+        ("--episode", "2", "--compare", str(earlier), str(tmp_path / "out"), "--policy.path=ckpt"):
+            f"--episode 2: --compare {earlier.name} has 2 episodes",
+        (str(tmp_path / "out"), "--env.type=predvla_libero"): "needs --policy.path",
+        ("--compare", str(tmp_path), str(tmp_path / "out"), "--policy.path=ckpt"): f"--compare {tmp_path}",
+    }
+    for argv, message in cases.items():
+        assert predvla_main(["trace", *argv]) == 2
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

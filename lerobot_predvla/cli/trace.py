@@ -56,6 +56,9 @@ def run(args: argparse.Namespace) -> int:
         if not any(a.startswith("--policy.path") for a in args.eval_args):
             raise ValueError("lerobot-eval needs --policy.path=CHECKPOINT after OUT.")
         compared = {d.name: load_trace(d) for d in args.compare}
+        for name, other in compared.items():
+            if args.episode >= len(other["episodes"]):
+                raise ValueError(f"--episode {args.episode}: --compare {name} has {len(other['episodes'])} episodes.")
     except ValueError as err:
         print(f"predvla trace: error: {err}", file=sys.stderr)
         return 2
@@ -82,11 +85,11 @@ def run(args: argparse.Namespace) -> int:
     trace = {"eval_args": eval_args, "episodes": episodes}
     args.out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(args.out / TRACE_FILE, trace)
-    try:
-        plot_traces({args.out.name: trace, **compared}, args.episode, args.out / FIGURE_FILE)
-    except ValueError as err:
-        print(f"predvla trace: error: {err} ({TRACE_FILE} is written)", file=sys.stderr)
+    if args.episode >= len(episodes):
+        print(f"predvla trace: error: --episode {args.episode}, but lerobot-eval ran {len(episodes)} episodes "
+              f"({args.out / TRACE_FILE} is written, no figure)", file=sys.stderr)
         return 2
+    plot_traces({args.out.name: trace, **compared}, args.episode, args.out / FIGURE_FILE)
     print(f"predvla trace: {len(episodes)} episodes, {len(episodes[0]['steps'])} steps each; "
           f"{args.out / TRACE_FILE}, {args.out / FIGURE_FILE}")
     return 0

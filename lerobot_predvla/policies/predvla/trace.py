@@ -56,8 +56,6 @@ def plot_traces(traces: dict[str, dict], episode: int, path: Path) -> None:
 
     fig, axes = plt.subplots(1 + len(MODULE_NAMES), 1, figsize=(9, 9), sharex=True)
     for label, trace in traces.items():
-        if episode >= len(trace["episodes"]):
-            raise ValueError(f"{label}: episode {episode} requested, the trace has {len(trace['episodes'])}.")
         ep = trace["episodes"][episode]
         (line,) = axes[0].plot(ep["steps"], [a[-1] for a in ep["action"]], label=label)
         if "move_newest" in ep:
