@@ -16,7 +16,6 @@ checkpoint is inspected (cheap numbers, drawn over training steps) and the last 
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -26,6 +25,7 @@ from tqdm import tqdm
 
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
 from lerobot_predvla.utils.checkpoints import find_pretrained
+from lerobot_predvla.utils.io import atomic_save_figure
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -134,10 +134,8 @@ def plot_all(out: Path, data, history: list[dict], replay: dict | None) -> None:
 
     def save(fig, name: str) -> None:
         fig.tight_layout()
-        tmp = out / f".{name}.tmp.png"
-        fig.savefig(tmp, dpi=100)
+        atomic_save_figure(fig, out / name, dpi=100)
         plt.close(fig)
-        os.replace(tmp, out / name)
 
     last = history[-1]
     tasks = len(data.names)

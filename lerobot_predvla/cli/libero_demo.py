@@ -24,7 +24,7 @@ from lerobot_predvla.cli.demos import task_ids
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, success_rates
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.utils.checkpoints import last_pretrained
-from lerobot_predvla.utils.io import atomic_write_json
+from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json
 
 BANNER = "=" * 78
 BIN = Path(sys.executable).parent
@@ -90,9 +90,7 @@ def plot_success(results: dict[str, dict[int, float]], suite: str, path: Path) -
     ax.set_title(f"PredVLA on {suite} (official init states)", fontsize=10)
     ax.legend()
     fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=120)
-    os.replace(tmp, path)
+    atomic_save_figure(fig, path, dpi=120)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -16,6 +16,7 @@ import torch
 from tqdm import tqdm
 
 from lerobot_predvla.utils.checkpoints import last_pretrained
+from lerobot_predvla.utils.io import atomic_save_figure
 
 BANNER = "=" * 78
 
@@ -100,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     ax.set(xlabel="control step", ylabel="action[0]", title="PredVLA on the synthetic dataset, episode 0")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(plot, dpi=120)
+    atomic_save_figure(fig, plot, dpi=120)
     (out / "results.json").write_text(json.dumps({k: v["action_mse"] for k, v in results.items()}, indent=2))
     print(f"plot: {plot}\nresults: {out / 'results.json'}")
     return 0

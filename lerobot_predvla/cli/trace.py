@@ -90,6 +90,6 @@ def run(args: argparse.Namespace) -> int:
               f"({args.out / TRACE_FILE} is written, no figure)", file=sys.stderr)
         return 2
     plot_traces({args.out.name: trace, **compared}, args.episode, args.out / FIGURE_FILE)
-    print(f"predvla trace: {len(episodes)} episodes, {len(episodes[0]['steps'])} steps each; "
+    print(f"predvla trace: {len(episodes)} episodes, up to {max(len(e['steps']) for e in episodes)} steps; "
           f"{args.out / TRACE_FILE}, {args.out / FIGURE_FILE}")
     return 0

@@ -11,7 +11,6 @@ means of the suite means and need every suite. Paired differences use the seeds 
 """
 
 import json
-import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
-from lerobot_predvla.utils.io import atomic_write_json, atomic_write_text
+from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
 SUMMARY_FILE = "report.json"
 REPORT_FILE = "report.md"
@@ -316,9 +315,7 @@ def corruption_table(summary: dict) -> str | None:
 
 # ----- figures -------------------------------------------------------------------------------------------
 def _save(fig, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, format="png", dpi=130, bbox_inches="tight")
-    os.replace(tmp, path)
+    atomic_save_figure(fig, path, dpi=130, bbox_inches="tight")
 
 
 def ladder_figure(summary: dict, path: Path) -> bool:

@@ -12,6 +12,8 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from lerobot_predvla.utils.io import atomic_save_figure
+
 from .configuration_predvla import MODULE_NAMES
 from .error_regression import ErrorRegression
 
@@ -68,7 +70,5 @@ def plot_traces(traces: dict[str, dict], episode: int, path: Path) -> None:
     axes[-1].set_xlabel("control step")
     fig.suptitle(f"episode {episode}: action and posterior moves per step of error regression")
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=90)
+    atomic_save_figure(fig, path, dpi=90)
     plt.close(fig)
-    tmp.replace(path)
