@@ -160,6 +160,32 @@ def test_a_later_call_with_other_seeds_adds_to_the_plan(tmp_path):
         Runner(later, tmp_path / "runs", execute=FakeLeRobot()).run(progress=False)
 
 
+def test_a_restricted_call_with_fewer_episodes_keeps_the_other_configurations_protocol(tmp_path):
+    """`--configs L3 --n-episodes 3` after a full sweep: A6 keeps its 5 episodes in the plan, and so does the
+    sweep-wide protocol; only L3's description is written afresh."""
+    import argparse
+
+    from lerobot_predvla.cli.sweep import apply_flags
+
+    configs = yaml.safe_load(sweep_file(tmp_path).read_text())["configs"]
+    configs[1]["n_episodes"] = 5
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], configs=configs)
+    Runner(Sweep.load(path), tmp_path / "runs", execute=FakeLeRobot()).run(progress=False)
+    before = json.loads((tmp_path / "runs/plan.json").read_text())
+    assert before["configs"]["A6"]["n_episodes"] == 5
+
+    later = Sweep.load(path)
+    flags = dict.fromkeys(("seeds", "suites", "steps", "episode_length", "device", "accelerate_processes",
+                           "eval_workers"))
+    apply_flags(later, argparse.Namespace(**flags, n_episodes=3))
+    fake = FakeLeRobot()
+    Runner(later, tmp_path / "runs", execute=fake).run(configs=["L3"], progress=False)
+    assert fake.commands == []  # L3 was already evaluated: nothing reruns
+    after = json.loads((tmp_path / "runs/plan.json").read_text())
+    assert after["configs"]["A6"] == before["configs"]["A6"] and after["protocol"] == before["protocol"]
+    assert after["configs"]["L3"]["n_episodes"] is None and after["runs"] == before["runs"]
+
+
 def test_shards_partition_training_units(tmp_path):
     sweep = Sweep.load(sweep_file(tmp_path))
     shards = [Runner(sweep, tmp_path / "runs").shard_units(None, (i, 3)) for i in range(3)]

@@ -542,25 +542,30 @@ class Runner:
         return True
 
     # ----- running ----------------------------------------------------------------------------------------
-    def write_plan(self, runs: list[Run]) -> None:
+    def write_plan(self, runs: list[Run], configs: list[str] | None = None) -> None:
         """`plan.json`: every run of the sweep and its configuration, so the report can mark missing runs.
 
         The runs already planned in RUNS_DIR are kept (those of configurations the sweep file still has): a later
-        call restricted by `--seeds`, `--suites` or `--configs` adds its runs instead of replacing the plan.
+        call restricted by `--seeds`, `--suites` or `--configs` adds its runs instead of replacing the plan. Only
+        the call's `configs` (all when None) are described afresh; the others keep their earlier descriptions, so a
+        call with `--n-episodes` or `--steps` does not rewrite the protocol of configurations it does not run.
         """
         path = self.runs_dir / "plan.json"
         try:
-            earlier = json.loads(path.read_text())["runs"] if path.is_file() else []
-            planned = [Run(**r) for r in earlier if r["config"] in self.sweep.configs]
+            earlier = json.loads(path.read_text()) if path.is_file() else {"runs": [], "configs": {}}
+            planned = [Run(**r) for r in earlier["runs"] if r["config"] in self.sweep.configs]
+            described = dict(earlier.get("configs", {}))
         except (ValueError, KeyError, TypeError) as err:
             raise SweepError(f"{path}: expected a sweep plan with a list of runs {{config, suite, seed}} ({err}); "
                              "delete it to plan from the sweep file alone") from err
         runs = planned + [r for r in runs if r not in planned]
+        fresh = set(configs or self.sweep.configs)
         atomic_write_json(path, {
             "runs": [asdict(r) for r in runs],
-            "configs": {name: asdict(spec) for name, spec in self.sweep.configs.items()},
-            "protocol": {"n_episodes": self.sweep.settings.n_episodes,
-                         "episode_length": self.sweep.settings.episode_length},
+            "configs": {name: asdict(spec) if name in fresh or name not in described else described[name]
+                        for name, spec in self.sweep.configs.items()},
+            "protocol": earlier["protocol"] if configs and "protocol" in earlier else {
+                "n_episodes": self.sweep.settings.n_episodes, "episode_length": self.sweep.settings.episode_length},
         })
 
     def shard_units(
@@ -597,7 +602,7 @@ class Runner:
         """Run (or skip) this shard's runs. Returns run keys by outcome: done, skipped, failed."""
         from tqdm import tqdm
 
-        self.write_plan(self.sweep.runs())
+        self.write_plan(self.sweep.runs(), configs)
         units = self.shard_units(configs, shard)
         outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": []}
         bar = tqdm(total=sum(len(r) for _, r in units), desc=f"sweep shard {shard[0]}/{shard[1]}", disable=not progress)
