@@ -72,3 +72,27 @@ def test_proprio_report_averages_to_the_models_eps_q(trained, synthetic_dataset)
 def test_inspect_names_a_path_without_checkpoint(tmp_path, capsys):
     assert main(["inspect", str(tmp_path)]) == 2
     assert str(tmp_path) in capsys.readouterr().err
+
+
+def test_er_variants_replay_other_inference_settings(trained, tmp_path, capsys):
+    """Each --er-variant is replayed with its settings: a vanishing step size leaves the open-loop actions."""
+    out = tmp_path / "inspect"
+    assert main(["inspect", str(trained), "--out", str(out),
+                 "--er-variant", "er_lr=1e-9", "--er-variant", "er_lambda_q=0,er_iterations=3"]) == 0
+    last = json.loads((out / "inspect.json").read_text())["history"][-1]
+    own, (tiny, a5) = last["error_regression"], last["error_regression_variants"]
+    assert tiny["settings"] == {"er_lr": 1e-9} and a5["settings"] == {"er_lambda_q": 0.0, "er_iterations": 3}
+    assert tiny["er_action_mse"] == pytest.approx(own["open_loop_action_mse"], rel=1e-4)
+    assert tiny["er_gripper_mse"] == pytest.approx(own["open_loop_gripper_mse"], rel=1e-4)
+    assert own["er_action_mse"] != pytest.approx(own["open_loop_action_mse"], rel=1e-4)  # Table 2's settings move
+    assert a5["er_action_mse"] != own["er_action_mse"]
+    printed = capsys.readouterr().out
+    assert "er_lr=1e-09" in printed and "er_lambda_q=0.0,er_iterations=3" in printed and "exact open loop" in printed
+
+
+@pytest.mark.parametrize("flags", [["--er-variant", "er_lr"], ["--er-variant", "tau=2"],
+                                   ["--er-variant", "er_iterations=0"], ["--er-variant", "er_lr=fast"],
+                                   ["--er-variant", "er_lr=0.1", "--no-er"]])
+def test_inspect_refuses_a_bad_er_variant(tmp_path, capsys, flags):
+    assert main(["inspect", str(tmp_path), *flags]) == 2
+    assert "--er-variant" in capsys.readouterr().err

@@ -12,6 +12,10 @@ checkpoint is inspected (cheap numbers, drawn over training steps) and the last 
 - proprio_error_per_dim.png: the proprioceptive prediction error per dimension, open loop and from the training
   posteriors, beside the demonstrations' spread around their task's mean;
 - training_curves.png (several checkpoints): the same numbers over training.
+
+`--er-variant KEY=VALUE[,KEY=VALUE]` (repeatable) replays error regression once more per variant with other
+inference settings on the same demonstrations and prints a table beside Table 2's settings: which settings bring
+the actions closer to the demonstrated ones, without the simulator.
 """
 
 import argparse
@@ -36,6 +40,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="training dataset (default: dataset.root of the checkpoint's train_config.json)")
     p.add_argument("--out", type=Path, default=None, help="output directory (default: CHECKPOINT/inspect)")
     p.add_argument("--no-er", action="store_true", help="skip the error-regression replay (the slow part)")
+    p.add_argument("--er-variant", action="append", default=[], metavar="KEY=VALUE[,KEY=VALUE]",
+                   help="also replay error regression with these inference settings, one variant per flag "
+                        "(keys: er_window, er_iterations, er_lr, er_complexity_weight, er_lambda_v, er_lambda_q)")
     p.set_defaults(func=run)
 
 
@@ -63,7 +70,12 @@ def dataset_root(checkpoint: Path) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
+    from lerobot_predvla.policies.predvla import diagnostics as dx
+
     try:
+        variants = [dx.parse_er_variant(text) for text in args.er_variant]
+        if variants and args.no_er:
+            raise ValueError("--er-variant replays error regression; it cannot go with --no-er.")
         checkpoints = find_checkpoints(args.checkpoint)
         root = args.dataset_root or dataset_root(checkpoints[-1][1])
         if not (root / "meta" / "info.json").is_file():
@@ -71,7 +83,6 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         print(f"predvla inspect: error: {err}", file=sys.stderr)
         return 2
-    from lerobot_predvla.policies.predvla import diagnostics as dx
     from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
 
     out = args.out or (args.checkpoint / "inspect")
@@ -92,6 +103,9 @@ def run(args: argparse.Namespace) -> int:
         episodes = [eps[0] for eps in data.episodes]
         replay = dx.replay_error_regression(policy, data, episodes)
         last["error_regression"] = dx.er_summary(replay, data)
+        last["error_regression_variants"] = [
+            dx.replay_er_variant(policy, data, episodes, overrides)
+            for overrides in tqdm(variants, desc="error-regression variants", unit="variant")]
     last["tasks"] = data.names
     plot_all(out, data, history, replay)
     dx.write_json(out / "inspect.json", {"dataset_root": str(root), "history": history})
@@ -124,6 +138,21 @@ def print_summary(report: dict) -> None:
         er = report["error_regression"]
         print(f"error regression replayed on one demonstration per task: action MSE {er['er_action_mse']:.4f} "
               f"(open loop {er['open_loop_action_mse']:.4f}); eps_q {er['er_eps_q']:.4g}, eps_v {er['er_eps_v']:.4g}")
+        if report.get("error_regression_variants"):
+            print_er_variants(er, report["error_regression_variants"])
+
+
+def print_er_variants(er: dict, variants: list[dict]) -> None:
+    """The replayed variants beside the checkpoint's own settings (raw action MSE against the demonstrations)."""
+    print(f"\n{'error regression settings':<40} {'action MSE':>10} {'gripper MSE':>11} "
+          + " ".join(f"{'gap ' + m:>12}" for m in MODULE_NAMES))
+    rows = [("checkpoint's own", er), *((",".join(f"{k}={v}" for k, v in r["settings"].items()), r) for r in variants),
+            ("exact open loop", {"er_action_mse": er["open_loop_action_mse"],
+                                 "er_gripper_mse": er["open_loop_gripper_mse"]})]
+    for name, r in rows:
+        gaps = r.get("er_gap_per_module", {})
+        print(f"{name:<40} {r['er_action_mse']:>10.4f} {r['er_gripper_mse']:>11.4f} "
+              + " ".join(f"{gaps[m]:>12.3f}" if m in gaps else f"{'':>12}" for m in MODULE_NAMES))
 
 
 def plot_all(out: Path, data, history: list[dict], replay: dict | None) -> None:

@@ -234,13 +234,56 @@ def er_summary(replay: dict, data: TaskData) -> dict:
     er = float((data.raw(replay["action"])[valid] - demo).pow(2).mean())
     ol = float((data.raw(replay["open_loop_action"])[valid] - demo).pow(2).mean())
     gap = replay["gap"][valid]
+    gripper = data.raw(replay["action"])[valid][:, -1] - demo[:, -1]  # the last action dimension
+    gripper_ol = data.raw(replay["open_loop_action"])[valid][:, -1] - demo[:, -1]
     return {
         "er_action_mse": er,
         "open_loop_action_mse": ol,
+        "er_gripper_mse": float(gripper.pow(2).mean()),
+        "open_loop_gripper_mse": float(gripper_ol.pow(2).mean()),
         "er_gap_per_module": {name: float(gap[:, m].mean()) for m, name in enumerate(MODULE_NAMES)},
         "er_eps_q": float(replay["eps_q"][valid].mean()),
         "er_eps_v": float(replay["eps_v"][valid].nanmean()),
     }
+
+
+# Inference settings an offline replay may vary (Table 2's "Online error regression" rows and the A4/A5 weights).
+ER_SETTINGS = {"er_window": int, "er_iterations": int, "er_lr": float, "er_complexity_weight": float,
+               "er_lambda_v": float, "er_lambda_q": float}
+
+
+def parse_er_variant(text: str) -> dict[str, int | float]:
+    """`KEY=VALUE[,KEY=VALUE]` of `ER_SETTINGS` -> typed overrides; ValueError naming what is wrong."""
+    overrides: dict[str, int | float] = {}
+    for item in text.split(","):
+        key, sep, value = item.strip().partition("=")
+        if not sep or key not in ER_SETTINGS:
+            raise ValueError(f"--er-variant {text!r}: expected KEY=VALUE[,KEY=VALUE] with KEY one of "
+                             f"{', '.join(ER_SETTINGS)}, got {item.strip()!r}.")
+        try:
+            overrides[key] = ER_SETTINGS[key](value)
+        except ValueError:
+            raise ValueError(f"--er-variant {text!r}: {key} needs a {ER_SETTINGS[key].__name__}, "
+                             f"got {value!r}.") from None
+        if not overrides[key] > 0 and key in ("er_window", "er_iterations", "er_lr"):
+            raise ValueError(f"--er-variant {text!r}: {key} must be positive (er_iterations=0 is the open loop "
+                             "that every replay already reports).")
+        if not overrides[key] >= 0:
+            raise ValueError(f"--er-variant {text!r}: {key} must not be negative, got {value!r}.")
+    return overrides
+
+
+def replay_er_variant(policy: PredVLAPolicy, data: TaskData, episodes: list[int],
+                      overrides: dict[str, int | float]) -> dict:
+    """`er_summary` of error regression replayed with other inference settings; the config is restored after."""
+    saved = {key: getattr(policy.config, key) for key in overrides}
+    try:
+        for key, value in overrides.items():
+            setattr(policy.config, key, value)
+        return {"settings": overrides, **er_summary(replay_error_regression(policy, data, episodes), data)}
+    finally:
+        for key, value in saved.items():
+            setattr(policy.config, key, value)
 
 
 def load_store(checkpoint: Path) -> Tensor | None:
