@@ -154,3 +154,44 @@ def test_per_task_tables_figure_and_stage_times(report):
     assert float(cells[5]) == pytest.approx(np.mean([rate("B2", "libero_object", s) for s in SEEDS]), abs=0.006)
     stages = text.split("## Stages: wall time and commands")[1]
     assert "| A4 | libero_goal | 1 |" in stages and "| A4 | libero_goal | 2 |" not in stages  # only what ran
+
+
+def write_eval_info(path: Path, successes: dict[int, list[bool]]) -> None:
+    atomic_write_json(path / "eval_info.json", {"per_task": [
+        {"task_group": "libero_object", "task_id": t, "metrics": {"successes": s}} for t, s in successes.items()]})
+
+
+def test_compared_runs_are_paired_episode_by_episode(tmp_path):
+    """Discordant episode pairs and the exact sign test, over the seeds whose runs share their starts."""
+    from lerobot_predvla.experiments.report import sign_test
+
+    runs = tmp_path / "runs"
+    outcomes = {  # (config, seed) -> per task, per episode
+        ("er", 0): {0: [True, True, False, True], 1: [True, False, True, True]},
+        ("ol", 0): {0: [True, False, False, False], 1: [False, False, True, True]},
+        ("er", 1): {0: [True, True, True, True], 1: [False, False, False, False]},
+        ("ol", 1): {0: [True, True, False, True], 1: [False, True, False, False]},
+        ("er", 2): {0: [True] * 4, 1: [True] * 4},  # evaluated from other starts: not a pair
+        ("ol", 2): {0: [False] * 4, 1: [False] * 4},
+    }
+    for (config, seed), tasks in outcomes.items():
+        for task, successes in tasks.items():  # one eval part per task, as `eval.tasks` sweeps write them
+            part = runs / "eval" / config / "libero_object" / f"seed{seed}" / f"task{task}"
+            part.mkdir(parents=True)
+            write_eval_info(part, {task: successes})
+        atomic_write_json(runs / "records" / config / "libero_object" / f"seed{seed}.json", {
+            "config": config, "suite": "libero_object", "seed": seed, "group": "main" if config == "er" else "ablation",
+            "compare_to": None if config == "er" else "er", "eval_seed": 1000 if (config, seed) == ("ol", 2) else 0,
+            "init_states": True, "n_episodes_per_task": 4, "episode_length": 280,
+            "tasks": {str(t): {"successes": sum(s), "episodes": len(s)} for t, s in tasks.items()}})
+    summary = write_report(runs, tmp_path / "report")
+    pairs = summary["configs"]["ol"]["episodes"]["libero_object"]
+    # seed 0: ol 3 successes, er 6; only ol 0, only er 3 (two on task 0, one on task 1).
+    # seed 1: ol 4, er 4; only ol 1 (task 1), only er 1 (task 0). Seed 2 started elsewhere and is left out.
+    assert pairs == {"against": "er", "seeds": [0, 1], "pairs": 16, "successes": 7, "against_successes": 10,
+                     "only": 1, "only_against": 4, "sign_test_p": pytest.approx(2 * (1 + 5) / 32)}
+    assert "episodes" not in summary["configs"]["er"]
+    assert sign_test(1, 3) == pytest.approx(2 * (1 + 4) / 16) and sign_test(0, 0) == 1.0 and sign_test(2, 2) == 1.0
+    assert sign_test(5, 1) == pytest.approx(2 * 7 / 64) and sign_test(10, 0) == pytest.approx(2 / 1024)
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## Paired episodes" in text and "| ol | er | object | 0, 1 | 16 | 7 / 10 | 1 / 4 | 0.375 |" in text

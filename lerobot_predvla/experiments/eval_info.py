@@ -10,19 +10,21 @@ class EvalInfoError(ValueError):
     """A file that is not a lerobot-eval eval_info.json with per-task results."""
 
 
-def parse_eval_info(path: Path) -> dict[str, dict[str, int]]:
-    """Per-task successes, sorted by task id: {task_id: {"successes": s, "episodes": n}}."""
+def episode_successes(path: Path) -> dict[str, list[bool]]:
+    """Success of every episode per task, sorted by task id: {task_id: [episode 0, episode 1, ...]}."""
     try:
         info = json.loads(Path(path).read_text())
-        tasks = {}
-        for entry in info["per_task"]:
-            successes = [bool(s) for s in entry["metrics"]["successes"]]
-            tasks[str(entry["task_id"])] = {"successes": sum(successes), "episodes": len(successes)}
+        tasks = {str(entry["task_id"]): [bool(s) for s in entry["metrics"]["successes"]] for entry in info["per_task"]}
     except (OSError, ValueError, KeyError, TypeError) as err:
         raise EvalInfoError(f"{path}: not a lerobot-eval {EVAL_INFO_FILE} with per_task successes ({err}).") from err
     if not tasks:
         raise EvalInfoError(f"{path}: no per-task results.")
     return dict(sorted(tasks.items(), key=lambda kv: int(kv[0])))
+
+
+def parse_eval_info(path: Path) -> dict[str, dict[str, int]]:
+    """Per-task successes, sorted by task id: {task_id: {"successes": s, "episodes": n}}."""
+    return {task: {"successes": sum(s), "episodes": len(s)} for task, s in episode_successes(path).items()}
 
 
 def success_rates(path: Path) -> dict[int, float]:

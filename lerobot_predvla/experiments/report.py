@@ -8,15 +8,23 @@ that are missing. Outputs in REPORT_DIR: `report.md` (Markdown tables and figure
 Success rates are percentages per (configuration, suite, seed): successes / episodes over all tasks. Tables
 show mean +/- sample standard deviation across seeds; 3-suite (spatial, goal, object) and 4-suite means are
 means of the suite means and need every suite. Paired differences use the seeds both configurations have.
+
+A configuration with `compare_to` (e.g. exact open loop against error regression) is also compared episode by
+episode, from the runs' `eval_info.json` files: both runs of a seed start from the same init states when they share
+the evaluation seed, reset mode and protocol, so each episode is a pair. The report counts the pairs that succeed
+in only one of the two and gives the exact two-sided sign test on them.
 """
 
 import json
+import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
+from lerobot_predvla.experiments.sweep import eval_run_dir
 from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
@@ -189,6 +197,68 @@ class Results:
                 entry["delta_mean3"] = m - p if m is not None and p is not None else None
             out["configs"][name] = entry
         return out
+
+
+# ----- paired episodes ------------------------------------------------------------------------------------
+PAIRING_KEYS = ("eval_seed", "init_states", "n_episodes_per_task", "episode_length")  # same starts when equal
+
+
+def run_episodes(runs_dir: Path, config: str, suite: str, seed: int) -> dict[tuple[str, int], bool]:
+    """Success of every evaluated episode of a run by (task id, episode index), from its eval_info.json files."""
+    episodes = {}
+    for path in sorted(eval_run_dir(runs_dir, config, suite, seed).rglob(EVAL_INFO_FILE)):
+        try:
+            tasks = episode_successes(path)
+        except EvalInfoError as err:
+            raise ReportError(str(err)) from err
+        episodes.update({(task, i): ok for task, successes in tasks.items() for i, ok in enumerate(successes)})
+    return episodes
+
+
+def sign_test(only_a: int, only_b: int) -> float:
+    """Exact two-sided sign test (binomial, p = 1/2) on the pairs that succeed in only one of the two runs."""
+    n = only_a + only_b
+    tail = sum(math.comb(n, k) for k in range(min(only_a, only_b) + 1)) / 2**n
+    return min(1.0, 2 * tail)
+
+
+def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
+    """Add `episodes` (per suite: pairs, successes, discordant counts, sign test) to every `compare_to` entry."""
+    by_run = {(r["config"], r["suite"], int(r["seed"])): r for r in records}
+    for name, entry in summary["configs"].items():
+        against = entry.get("compare_to")
+        if not against:
+            continue
+        for suite in summary["suites"]:
+            seeds = sorted(seed for (c, s, seed), r in by_run.items() if c == name and s == suite
+                           and (against, suite, seed) in by_run
+                           and all(r.get(k) == by_run[(against, suite, seed)].get(k) for k in PAIRING_KEYS))
+            counts = {"pairs": 0, "successes": 0, "against_successes": 0, "only": 0, "only_against": 0}
+            for seed in seeds:
+                mine, theirs = (run_episodes(runs_dir, c, suite, seed) for c in (name, against))
+                for key in mine.keys() & theirs.keys():
+                    a, b = mine[key], theirs[key]
+                    counts["pairs"] += 1
+                    counts["successes"] += a
+                    counts["against_successes"] += b
+                    counts["only"] += a and not b
+                    counts["only_against"] += b and not a
+            if counts["pairs"]:
+                entry.setdefault("episodes", {})[suite] = {
+                    "against": against, "seeds": seeds, **counts,
+                    "sign_test_p": sign_test(counts["only"], counts["only_against"])}
+
+
+def episodes_table(summary: dict) -> str | None:
+    rows = [[name, entry["episodes"][suite]["against"], SUITE_LABELS[suite],
+             ", ".join(map(str, e["seeds"])), str(e["pairs"]), f"{e['successes']} / {e['against_successes']}",
+             f"{e['only']} / {e['only_against']}", f"{e['sign_test_p']:.3g}"]
+            for name, entry in summary["configs"].items() for suite in summary["suites"]
+            if (e := entry.get("episodes", {}).get(suite))]
+    if not rows:
+        return None
+    return _table(["Model", "against", "suite", "seeds", "episode pairs", "successes (model / against)",
+                   "only model / only against", "sign test p"], rows)
 
 
 # ----- tables --------------------------------------------------------------------------------------------
@@ -588,6 +658,7 @@ def write_report(runs_dir: Path, out: Path) -> dict:
     plan_path = Path(runs_dir) / "plan.json"
     results = Results.build(records, _load_json(plan_path) if plan_path.is_file() else None)
     summary = results.summary()
+    paired_episodes(summary, records, Path(runs_dir))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     made = {
@@ -616,6 +687,9 @@ def write_report(runs_dir: Path, out: Path) -> dict:
          "Δ: change in the 3-suite mean relative to the preceding rung (side branches: relative to their parent)."),
         ("Ablations", ablation_table(summary), "pertask",
          "Δ: mean paired difference from the intact model over the seeds both have (n)."),
+        ("Paired episodes", episodes_table(summary), None,
+         "Each episode against the same start of the compared run (same evaluation seed, resets and protocol); "
+         "sign test: exact, two-sided, on the episodes that succeed in only one."),
         ("Corrupted observations", corruption_table(summary), "corruption",
          "α: fraction of observations replaced; bands ±1 seed standard deviation; dashed: open loop."),
         *[(f"Per task: {SUITE_LABELS[suite]}", task_table(results, suite), "tasks" if i == 0 else None,

@@ -48,6 +48,11 @@ class SweepError(ValueError):
     """A malformed sweep file or an impossible request."""
 
 
+def eval_run_dir(runs_dir: Path, config: str, suite: str, seed: int) -> Path:
+    """Where a run's evaluation writes: its eval_info.json, or one task part per subfolder."""
+    return Path(runs_dir) / "eval" / config / suite / f"seed{seed}"
+
+
 def _as_args(values: dict, prefix: str) -> list[str]:
     """{"tau": [30, 14, 8, 2], "x": {"y": 1}} -> ["--policy.tau=[30,14,8,2]", "--policy.x.y=1"]."""
     args = []
@@ -402,7 +407,7 @@ class Runner:
         return self.runs_dir / "train" / config / suite / f"seed{seed}"
 
     def eval_dir(self, run: Run) -> Path:
-        return self.runs_dir / "eval" / run.config / run.suite / f"seed{run.seed}"
+        return eval_run_dir(self.runs_dir, run.config, run.suite, run.seed)
 
     def record_path(self, run: Run) -> Path:
         return self.runs_dir / "records" / run.config / run.suite / f"seed{run.seed}.json"
