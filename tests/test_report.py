@@ -195,3 +195,15 @@ def test_compared_runs_are_paired_episode_by_episode(tmp_path):
     assert sign_test(5, 1) == pytest.approx(2 * 7 / 64) and sign_test(10, 0) == pytest.approx(2 / 1024)
     text = (tmp_path / "report" / "report.md").read_text()
     assert "## Paired episodes" in text and "| ol | er | object | 0, 1 | 16 | 7 / 10 | 1 / 4 | 0.375 |" in text
+
+
+def test_runs_share_their_starts_only_with_the_same_seed_and_resets():
+    from lerobot_predvla.experiments.report import same_starts
+
+    official = {"eval_seed": 0, "init_states": True, "episode_length": 280, "n_episodes_per_task": 10}
+    assert same_starts(official, {**official, "n_episodes_per_task": 20})  # episode i: official init state i
+    assert not same_starts(official, {**official, "eval_seed": 1})
+    assert not same_starts(official, {**official, "episode_length": 600})
+    resets = {**official, "init_states": False, "eval_seed": 1000, "n_episodes_per_task": 5}
+    assert same_starts(resets, dict(resets)) and not same_starts(resets, official)
+    assert not same_starts(resets, {**resets, "n_episodes_per_task": 10})

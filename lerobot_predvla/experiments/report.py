@@ -200,7 +200,14 @@ class Results:
 
 
 # ----- paired episodes ------------------------------------------------------------------------------------
-PAIRING_KEYS = ("eval_seed", "init_states", "n_episodes_per_task", "episode_length")  # same starts when equal
+PAIRING_KEYS = ("eval_seed", "init_states", "episode_length")
+
+
+def same_starts(a: dict, b: dict) -> bool:
+    """Whether episode i of a task starts from the same state in both runs. From the official init states episode
+    i starts from init state i whatever the number of episodes; randomised resets also need the same number."""
+    return all(a.get(k) == b.get(k) for k in PAIRING_KEYS) and (
+        a.get("init_states") is not False or a.get("n_episodes_per_task") == b.get("n_episodes_per_task"))
 
 
 def run_episodes(runs_dir: Path, config: str, suite: str, seed: int) -> dict[tuple[str, int], bool]:
@@ -232,7 +239,7 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
         for suite in summary["suites"]:
             seeds = sorted(seed for (c, s, seed), r in by_run.items() if c == name and s == suite
                            and (against, suite, seed) in by_run
-                           and all(r.get(k) == by_run[(against, suite, seed)].get(k) for k in PAIRING_KEYS))
+                           and same_starts(r, by_run[(against, suite, seed)]))
             counts = {"pairs": 0, "successes": 0, "against_successes": 0, "only": 0, "only_against": 0}
             for seed in seeds:
                 mine, theirs = (run_episodes(runs_dir, c, suite, seed) for c in (name, against))
