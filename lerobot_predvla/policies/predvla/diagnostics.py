@@ -231,16 +231,14 @@ def er_summary(replay: dict, data: TaskData) -> dict:
     """Action error of error regression and of open loop against the replayed demonstrations (raw units)."""
     valid = replay["valid"]
     demo = data.raw(replay["demo_action"])[valid]
-    er = float((data.raw(replay["action"])[valid] - demo).pow(2).mean())
-    ol = float((data.raw(replay["open_loop_action"])[valid] - demo).pow(2).mean())
+    er = (data.raw(replay["action"])[valid] - demo).pow(2)
+    ol = (data.raw(replay["open_loop_action"])[valid] - demo).pow(2)
     gap = replay["gap"][valid]
-    gripper = data.raw(replay["action"])[valid][:, -1] - demo[:, -1]  # the last action dimension
-    gripper_ol = data.raw(replay["open_loop_action"])[valid][:, -1] - demo[:, -1]
     return {
-        "er_action_mse": er,
-        "open_loop_action_mse": ol,
-        "er_gripper_mse": float(gripper.pow(2).mean()),
-        "open_loop_gripper_mse": float(gripper_ol.pow(2).mean()),
+        "er_action_mse": float(er.mean()),
+        "open_loop_action_mse": float(ol.mean()),
+        "er_gripper_mse": float(er[:, -1].mean()),  # the last action dimension
+        "open_loop_gripper_mse": float(ol[:, -1].mean()),
         "er_gap_per_module": {name: float(gap[:, m].mean()) for m, name in enumerate(MODULE_NAMES)},
         "er_eps_q": float(replay["eps_q"][valid].mean()),
         "er_eps_v": float(replay["eps_v"][valid].nanmean()),
