@@ -105,6 +105,17 @@ def train_step_fn(model: PredictiveModel, rollout: Callable, data: dict[str, Ten
     return step
 
 
+def bf16_step_fn(step: Callable[[], float]) -> Callable[[], float]:
+    """`step` under bfloat16 autocast, as `lerobot-train --policy.use_amp=true` takes it on the CPU (the recurrence's
+    loops and the heads in bfloat16, losses, posteriors and both Adams in float32)."""
+
+    def bf16_step() -> float:
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            return step()
+
+    return bf16_step
+
+
 def control_stream(config: PredVLAConfig, batch: int, steps: int, seed: int = 0) -> tuple[Tensor, list]:
     g = torch.Generator().manual_seed(seed)
     language = torch.randn(batch, config.language_dim, generator=g)
@@ -239,6 +250,12 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     record("train_step_ms_fast", fast_step, reps_fast)
     replay, results["train_matmuls"] = floor_fn(fast_step)
     record("train_step_ms_floor", replay, reps_fast)
+    # Mixed precision (`--policy.use_amp`, the CPU default): fp32 and bf16 steps in alternation, each with its own
+    # copy of the same weights and posteriors, at Table 2's batch and sequence length.
+    amp = {"train_step_ms_fp32": train_step_fn(randomised_model(config), fast, data),
+           "train_step_ms_bf16": bf16_step_fn(train_step_fn(randomised_model(config), fast, data))}
+    for key, (median, times) in interleaved_median_ms(amp, reps_fast, warmup=2).items():
+        results[key], spread[key] = median, times
     record("er_ms_ref_b1", control_step_fn(model, ref, 1), reps_ref)
     # Error regression with the Python loops (the default) and the compiled ones (`recurrence_backend="cpp"`, same
     # weights), timed in alternation with their floor: both issue the same matmuls on the same operands (checked).
@@ -266,6 +283,7 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
         threads=threads, batch=batch, steps=steps, window=config.er_window, er_iterations=config.er_iterations,
         train_speedup=results["train_step_ms_ref"] / results["train_step_ms_fast"],
         train_fast_over_floor=results["train_step_ms_fast"] / results["train_step_ms_floor"],
+        train_bf16_over_fp32=results["train_step_ms_bf16"] / results["train_step_ms_fp32"],
         er_speedup_b1=results["er_ms_ref_b1"] / results["er_ms_fast_b1"],
         er_fast_over_floor_b1=results["er_ms_fast_b1"] / results["er_ms_floor_b1"],
         er_fast_over_floor_b10=results["er_ms_fast_b10"] / results["er_ms_floor_b10"],
@@ -290,6 +308,9 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     print(f"  error regression with the compiled loops (recurrence_backend='cpp'), b1 / b10: "
           f"{results['er_ms_cpp_b1']:.1f} / {results['er_ms_cpp_b10']:.1f} ms, over the floor "
           f"{results['er_cpp_over_floor_b1']:.2f} / {results['er_cpp_over_floor_b10']:.2f}")
+    print(f"  training step B={batch} T={steps} under bf16 autocast / fp32, in alternation: "
+          f"{results['train_step_ms_bf16']:.1f} / {results['train_step_ms_fp32']:.1f} ms "
+          f"(ratio {results['train_bf16_over_fp32']:.2f})")
     print(f"  front end b1 (2 cameras, 128 px, fp32): {results['frontend_ms_b1']:.1f} ms; "
           f"control step b1 with it amortised over {config.visual_refresh_interval} steps: "
           f"{results['control_ms_fast_b1']:.1f} ms")

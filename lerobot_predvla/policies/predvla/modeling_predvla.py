@@ -233,7 +233,9 @@ class PredVLAPolicy(PreTrainedPolicy):
             batch = self.corruption(self.control_step, batch)
         self.control_step += 1
         (language, vision, proprio), (_, vision_ok, proprio_ok) = self.guard(batch)
-        with torch.inference_mode(False), torch.enable_grad():
+        # Error regression runs in float32 also under `--policy.use_amp` (lerobot-eval's autocast): at batch 1 its
+        # matmuls are slower in bfloat16 on CPU, and its Adam steps on the window are small.
+        with torch.inference_mode(False), torch.enable_grad(), torch.autocast(vision.device.type, enabled=False):
             # Inputs created in inference mode cannot enter autograd: clone them out of it.
             inputs = [x.clone() for x in (language, vision, proprio, vision_ok, proprio_ok)]
             action = self.error_regression(*inputs).detach()

@@ -17,6 +17,22 @@ from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.recurrence import A_BOTTOM, A_TOP, FusedWeights, Meta, T, V, recurrence
 
 
+def autocast_dtype(device_type: str) -> torch.dtype | None:
+    """The dtype of an enclosing `torch.autocast` on `device_type` (LeRobot's `--policy.use_amp`), else None."""
+    return torch.get_autocast_dtype(device_type) if torch.is_autocast_enabled(device_type) else None
+
+
+def cast_floats(tree, dtype: torch.dtype):
+    """`tree` (nested tuples, lists and NamedTuples of tensors or None) with every tensor cast to `dtype`;
+    the casts are differentiable, so gradients reach the float32 parameters and posteriors in float32."""
+    if isinstance(tree, Tensor):
+        return tree.to(dtype)
+    if tree is None:
+        return None
+    items = [cast_floats(x, dtype) for x in tree]
+    return type(tree)(*items) if hasattr(tree, "_fields") else type(tree)(items)
+
+
 class RecurrentState(NamedTuple):
     """State carried between control steps: module outputs d^l = tanh(h^l) and efference predictions."""
 
@@ -249,10 +265,17 @@ class PredictiveModel(nn.Module):
             p[A_BOTTOM] = p[A_BOTTOM] + extra_ab
         cfg = self.config
         meta = Meta(self.alpha, cfg.use_efference_copy, cfg.num_mixtures, cfg.action_dim, cfg.proprio_dim)
+        weights = self.fused_weights(c_q is None)
+        inputs = (p, state.h, state.d, state.a_hat, state.q_hat)
         run = recurrence_cpp.recurrence if cfg.recurrence_backend == "cpp" else recurrence
-        d, q_hat, a_hat, hidden, h_final = run(
-            meta, p, state.h, state.d, state.a_hat, state.q_hat, self.fused_weights(c_q is None)
-        )
+        low = autocast_dtype(p[T].device.type)
+        if low is not None:  # mixed precision (`--policy.use_amp`): the loops in `low`, the losses in float32
+            inputs, weights = cast_floats((inputs, weights), low)
+            run = recurrence  # the compiled loops are float32/float64 only
+        with torch.autocast(p[T].device.type, enabled=False):  # the loops write into preallocated buffers
+            d, q_hat, a_hat, hidden, h_final = run(meta, *inputs, weights)
+        if low is not None:
+            d, q_hat, a_hat, hidden, h_final = cast_floats((d, q_hat, a_hat, hidden, h_final), torch.float32)
         final = RecurrentState(h_final, tuple(x[-1] for x in d), a_hat[-1], q_hat[-1])
         # Full GMM parameters (for the NLL) batched after the loop from the loop's hidden layer; their mode
         # is the loop's a_hat.
@@ -284,5 +307,6 @@ class PredictiveModel(nn.Module):
         return (vision - v_hat).pow(2).mean(-1), (proprio - traj.q_hat).pow(2).mean(-1)
 
     def action_nll(self, traj: Trajectory, action: Tensor) -> Tensor:
-        """Negative log-likelihood of the demonstrated action under the GMM head, (time, batch)."""
-        return -GMMActionHead.distribution(*traj.action_params).log_prob(action)
+        """Negative log-likelihood of the demonstrated action under the GMM head, (time, batch); in float32 also
+        under mixed precision (the heads' matmuls may run in bfloat16, the mixture's log-sum-exp does not)."""
+        return -GMMActionHead.distribution(*(x.float() for x in traj.action_params)).log_prob(action.float())
