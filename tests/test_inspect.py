@@ -40,9 +40,11 @@ def test_inspect_reports_every_checkpoint_and_draws_the_figures(trained, tmp_pat
     assert er["er_eps_v"] > 0 and er["er_eps_q"] > 0  # finite: the visual error of the refresh steps
     # Eq. 7's eps_q per proprioceptive dimension: open loop, from the training posteriors, and the demo floor.
     q = last["proprio_error_per_dim"]
-    assert set(q) == {"open_loop", "posteriors", "demo_spread"}
-    assert len({len(v) for v in q.values()}) == 1 and len(q["open_loop"]) > 1
-    assert all(0.0 <= x < 1e3 for v in q.values() for x in v) and sum(q["demo_spread"]) > 0.0
+    assert set(q) == {"open_loop", "posteriors", "demo_spread", "removed"}
+    per_dim = [q[k] for k in ("open_loop", "posteriors", "demo_spread")]
+    assert len({len(v) for v in per_dim}) == 1 and len(q["open_loop"]) > 1
+    assert all(0.0 <= x < 1e3 for v in per_dim for x in v) and sum(q["demo_spread"]) > 0.0
+    assert set(q["removed"]) == {"proprio", "vision"} and all(x < 1.0 for x in q["removed"].values())
     for name in ("open_loop_vs_demos", "language_swap", "prior_posterior_gap", "errors_over_episode",
                  "training_curves", "proprio_error_per_dim"):
         assert (out / f"{name}.png").stat().st_size > 1000
@@ -67,6 +69,45 @@ def test_proprio_report_averages_to_the_models_eps_q(trained, synthetic_dataset)
         _, eps_q = model.prediction_errors(traj, batch["vision"], batch["state"])
     expected = float(eps_q[batch["valid"]].mean())
     assert sum(per_dim["open_loop"]) / len(per_dim["open_loop"]) == pytest.approx(expected, rel=1e-5)
+
+
+def test_removed_fraction_compares_the_posteriors_rollout_with_open_loop(trained, synthetic_dataset):
+    """1 - eps(posteriors) / eps(open loop), eps_v on refresh steps only, from the checkpoint's own store."""
+    import torch
+
+    from lerobot_predvla.policies.predvla import diagnostics as dx
+    from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
+
+    path = trained / "checkpoints" / "last" / "pretrained_model"
+    policy = PredVLAPolicy.from_pretrained(path).eval()
+    data, store = dx.TaskData.load(synthetic_dataset, policy), dx.load_store(path)
+    removed = dx.proprio_report(policy, data, store)["removed"]
+    model, seq = policy.model, data.sequences
+    batch = seq.batch(torch.arange(seq.state.shape[0]), torch.device("cpu"))
+    valid = batch["valid"]
+    fresh = valid & (torch.arange(valid.shape[0])[:, None] % policy.config.visual_refresh_interval == 0)
+    errors = []
+    with torch.no_grad():
+        lang = model.language_term(batch["language"])
+        for c_q in (None, store.transpose(0, 1)):
+            traj = model.rollout(model.initial_state(valid.shape[1]), lang, c_q, steps=valid.shape[0])
+            eps_v, eps_q = model.prediction_errors(traj, batch["vision"], batch["state"])
+            errors.append((float(eps_q[valid].mean()), float(eps_v[fresh].mean())))
+    (ol_q, ol_v), (post_q, post_v) = errors
+    assert removed["proprio"] == pytest.approx(1 - post_q / ol_q, rel=1e-5)
+    assert removed["vision"] == pytest.approx(1 - post_v / ol_v, rel=1e-5)
+
+
+def test_every_keeps_multiples_and_the_last_checkpoint(tmp_path):
+    from lerobot_predvla.cli.inspect import find_checkpoints
+
+    for step in (1000, 2000, 3000, 4000, 5000, 6000, 7000):
+        (tmp_path / "checkpoints" / f"{step:06d}" / "pretrained_model").mkdir(parents=True)
+        (tmp_path / "checkpoints" / f"{step:06d}" / "pretrained_model" / "config.json").write_text("{}")
+    assert [s for s, _ in find_checkpoints(tmp_path, every=2500)] == [5000, 7000]
+    assert [s for s, _ in find_checkpoints(tmp_path, every=1000)] == [1000, 2000, 3000, 4000, 5000, 6000, 7000]
+    with pytest.raises(ValueError, match="--every"):
+        find_checkpoints(tmp_path, every=0)
 
 
 def test_inspect_names_a_path_without_checkpoint(tmp_path, capsys):

@@ -43,11 +43,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--er-variant", action="append", default=[], metavar="KEY=VALUE[,KEY=VALUE]",
                    help="also replay error regression with these inference settings, one variant per flag "
                         "(keys: er_window, er_iterations, er_lr, er_complexity_weight, er_lambda_v, er_lambda_q)")
+    p.add_argument("--every", type=int, default=None, metavar="N",
+                   help="with a lerobot-train output directory: inspect only the checkpoints whose step is a multiple "
+                        "of N, and the last one (default: every checkpoint)")
     p.set_defaults(func=run)
 
 
-def find_checkpoints(path: Path) -> list[tuple[int | None, Path]]:
-    """(training step, pretrained_model directory) pairs, oldest first."""
+def find_checkpoints(path: Path, every: int | None = None) -> list[tuple[int | None, Path]]:
+    """(training step, pretrained_model directory) pairs, oldest first; with `every`, only steps that are a
+    multiple of it, and the last."""
     pretrained = find_pretrained(path)
     if pretrained is not None:
         return [(None, pretrained)]
@@ -56,7 +60,11 @@ def find_checkpoints(path: Path) -> list[tuple[int | None, Path]]:
     if not found:
         raise ValueError(f"{path}: no PredVLA checkpoint (expected config.json, {PRETRAINED_DIR}/ or "
                          f"{CHECKPOINTS_DIR}/<step>/{PRETRAINED_DIR}/).")
-    return found
+    if every is None:
+        return found
+    if every < 1:
+        raise ValueError(f"--every must be >= 1, got {every}.")
+    return [(step, d) for step, d in found if step % every == 0 or (step, d) == found[-1]]
 
 
 def dataset_root(checkpoint: Path) -> Path:
@@ -76,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         variants = [dx.parse_er_variant(text) for text in args.er_variant]
         if variants and args.no_er:
             raise ValueError("--er-variant replays error regression; it cannot go with --no-er.")
-        checkpoints = find_checkpoints(args.checkpoint)
+        checkpoints = find_checkpoints(args.checkpoint, args.every)
         root = args.dataset_root or dataset_root(checkpoints[-1][1])
         if not (root / "meta" / "info.json").is_file():
             raise ValueError(f"{root}: not a LeRobot dataset (meta/info.json missing).")
@@ -130,6 +138,9 @@ def print_summary(report: dict) -> None:
         print(f"posteriors {name:>8}: |c_q| {p['mean_norm']:.3f}, per-task means {p['between_task_mean_distance']:.3f}"
               f" apart vs {p['within_task_spread']:.3f} within a task, |c_q - c_p| {p['prior_gap']:.3f}")
     q = report["proprio_error_per_dim"]
+    if "removed" in q:
+        print(f"the training posteriors remove {q['removed']['proprio']:.0%} of the open loop's proprioceptive error "
+              f"and {q['removed']['vision']:.0%} of its visual error")
     for name in ("open_loop", "posteriors", "demo_spread"):
         if name in q:
             print(f"proprioceptive error per dimension, {name.replace('_', ' ')}: "
@@ -256,21 +267,39 @@ def plot_all(out: Path, data, history: list[dict], replay: dict | None) -> None:
 
     steps = [h["step"] for h in history]
     if len(history) > 1 and None not in steps and tasks > 1:
-        fig, axes = plt.subplots(1, 3, figsize=(14, 3.4))
-        lang = [h["language"] for h in history]
-        axes[0].plot(steps, [sum(x["open_loop_mse_own_task"]) / tasks for x in lang], label="own task")
-        axes[0].plot(steps, [sum(x["open_loop_mse_nearest_other_task"]) / tasks for x in lang],
-                     label="nearest other task")
-        axes[0].set(title="open loop vs mean demonstrations (MSE)", yscale="log")
-        axes[1].plot(steps, [x["mean_language_swap_mse"] for x in lang], label="language swap MSE")
-        axes[1].plot(steps, [x["language_difference_drive_norm"] for x in lang], label="|W_lang (l_i - l_j)|")
-        axes[1].set(title="language")
-        if all("posteriors" in h for h in history):
-            for name in MODULE_NAMES:
-                axes[2].plot(steps, [h["posteriors"][name]["prior_gap"] for h in history], label=name)
-        axes[2].set(title="training |c_q - c_p| per module")
-        for ax in axes:
-            ax.set_xlabel("training step")
-            ax.legend(fontsize=7)
-            ax.title.set_fontsize(9)
-        save(fig, "training_curves.png")
+        save(training_curves(plt, steps, history, tasks), "training_curves.png")
+
+
+def training_curves(plt, steps: list[int], history: list[dict], tasks: int):
+    """The mechanism over training, one panel per question: does the instruction pick the task's behaviour, do
+    the posteriors explain what each demonstration adds, how far are priors from posteriors."""
+    fig, axes = plt.subplots(2, 3, figsize=(14, 6.4))
+    axes = axes.flatten()
+    lang = [h["language"] for h in history]
+    axes[0].plot(steps, [100 * x["open_loop_picks_own_task"] for x in lang], "o-")
+    axes[0].axhline(100 / tasks, color="0.6", ls="--", label="chance")
+    axes[0].set(title="open loop closest to its own task's mean demonstration (% of tasks)", ylim=(0, 105))
+    axes[1].plot(steps, [sum(x["open_loop_mse_own_task"]) / tasks for x in lang], label="own task")
+    axes[1].plot(steps, [sum(x["open_loop_mse_nearest_other_task"]) / tasks for x in lang],
+                 label="nearest other task")
+    axes[1].set(title="open loop vs mean demonstrations (action MSE)", yscale="log")
+    axes[2].plot(steps, [x["mean_language_swap_mse"] for x in lang], label="language swap (action MSE)")
+    axes[2].plot(steps, [x["mean_demo_gap"] for x in lang], label="between tasks' mean demonstrations")
+    axes[2].set(title="instruction swap: how far the open-loop actions move")
+    removed = [h["proprio_error_per_dim"].get("removed") for h in history]
+    if all(r is not None for r in removed):
+        for key in ("proprio", "vision"):
+            axes[3].plot(steps, [100 * r[key] for r in removed], "o-", label=key)
+    axes[3].set(title="open-loop prediction error the training posteriors remove (%)")
+    if all("posteriors" in h for h in history):
+        for name in MODULE_NAMES:
+            axes[4].plot(steps, [h["posteriors"][name]["prior_gap"] for h in history], label=name)
+    axes[4].set(title="training |c_q - c_p| per module")
+    axes[5].plot(steps, [x["language_difference_drive_norm"] for x in lang], label="|W_lang (l_i - l_j)|")
+    axes[5].plot(steps, [x["language_drive_norm"] for x in lang], label="|W_lang l|")
+    axes[5].set(title="language drive of T (Eq. 4)")
+    for ax in axes:
+        ax.set_xlabel("training step")
+        ax.legend(fontsize=7)
+        ax.title.set_fontsize(8)
+    return fig

@@ -165,27 +165,32 @@ def proprio_report(policy: PredVLAPolicy, data: TaskData, store: Tensor | None) 
     Of the exact open-loop chain and, where the checkpoint has them, of the rollout from each demonstration's
     own training posteriors; beside them the demonstrations' spread around their task's time-aligned mean state,
     which no observation-blind chain can get below. Posteriors that explain how demonstrations differ bring the
-    second well below the first.
+    second well below the first: `removed` is the fraction of the open-loop eps_q and eps_v (the latter on visual
+    refresh steps) that the posteriors remove, 1 - posteriors / open loop.
     """
     model, seq = policy.model, data.sequences
     batch = seq.batch(torch.arange(seq.state.shape[0]), torch.device("cpu"))
     valid, state = batch["valid"], batch["state"]  # (L, E), (L, E, P)
+    fresh = valid & (torch.arange(valid.shape[0])[:, None] % policy.config.visual_refresh_interval == 0)
     lang_term = model.language_term(batch["language"])
-
-    def per_dim(q_hat: Tensor) -> list[float]:
-        return (q_hat - state)[valid].pow(2).mean(0).tolist()
-
-    out = {"open_loop": per_dim(model.rollout(model.initial_state(valid.shape[1]), lang_term,
-                                              steps=valid.shape[0]).q_hat)}
+    trajectories = {"open_loop": model.rollout(model.initial_state(valid.shape[1]), lang_term, steps=valid.shape[0])}
     if store is not None:
-        out["posteriors"] = per_dim(model.rollout(model.initial_state(valid.shape[1]), lang_term,
-                                                  store.transpose(0, 1)).q_hat)
+        trajectories["posteriors"] = model.rollout(model.initial_state(valid.shape[1]), lang_term,
+                                                   store.transpose(0, 1))
+    out, mean_errors = {}, {}
+    for name, traj in trajectories.items():
+        out[name] = (traj.q_hat - state)[valid].pow(2).mean(0).tolist()
+        eps_v, eps_q = model.prediction_errors(traj, batch["vision"], state)
+        mean_errors[name] = {"proprio": float(eps_q[valid].mean()), "vision": float(eps_v[fresh].mean())}
+    if store is not None:
+        out["removed"] = {key: 1.0 - mean_errors["posteriors"][key] / mean_errors["open_loop"][key]
+                          for key in ("proprio", "vision")}
     mean_state = state.clone()
     w = valid.float()[..., None]
     for eps in data.episodes:
         mean_state[:, eps] = ((state[:, eps] * w[:, eps]).sum(1, keepdim=True)
                               / w[:, eps].sum(1, keepdim=True).clamp_min(1))
-    out["demo_spread"] = per_dim(mean_state)
+    out["demo_spread"] = (mean_state - state)[valid].pow(2).mean(0).tolist()
     return out
 
 
