@@ -49,6 +49,7 @@ PREDICTIVE_TAG = "predictive-coding"  # PredVLA and the ladder rungs that keep i
 RESNET18_BACKBONE_PARAMS = 11_176_512
 MINILM_PARAMS = 22_713_216
 FRONTEND_STEP = "predvla_frontend_processor"
+MACHINE_FIELDS = ("frontend_dir", "device")  # policy config fields that name the training machine's resources
 _LEFTOVER = re.compile(r"\$\{?[A-Za-z_][A-Za-z0-9_]*\}?|\{\{|\}\}")
 _FEATURE_MEANING = {
     "observation.vision_features": "ResNet18 features of each camera, PCA per camera (cached or computed by the "
@@ -120,23 +121,25 @@ def read_json(files: dict[str, Path | bytes], name: str) -> dict:
 
 
 def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
-    """The files as every route publishes them: the training machine's paths cleared from the configs.
+    """The files as every route publishes them: the training machine's paths and device cleared from the configs.
 
     `frontend_dir` (the artefact is published beside the weights and inside the preprocessor), the dataset root and
-    the output directory name places on the training machine only; loading ignores them once they are None.
+    the output directory name places on the training machine only; loading ignores them once they are None. The
+    device is the training machine's too: LeRobot keeps a stored device that is available (a checkpoint trained on
+    the CPU would run on the CPU of a GPU machine) and picks the best available one when it is None.
     """
     published: dict[str, Path | bytes] = dict(files)
     if "config.json" in files:
         config = read_json(files, "config.json")
-        if "frontend_dir" in config:
-            published["config.json"] = json.dumps({**config, "frontend_dir": None}, indent=4).encode()
+        published["config.json"] = json.dumps(
+            {**config, **{k: None for k in MACHINE_FIELDS if k in config}}, indent=4).encode()
     if "train_config.json" in files:
         train_cfg = read_json(files, "train_config.json")
         train_cfg["output_dir"] = None
         if isinstance(train_cfg.get("dataset"), dict):
             train_cfg["dataset"]["root"] = None
-        if isinstance(train_cfg.get("policy"), dict) and "frontend_dir" in train_cfg["policy"]:
-            train_cfg["policy"]["frontend_dir"] = None
+        if isinstance(train_cfg.get("policy"), dict):
+            train_cfg["policy"].update({k: None for k in MACHINE_FIELDS if k in train_cfg["policy"]})
         published["train_config.json"] = json.dumps(train_cfg, indent=4).encode()
     return published
 

@@ -1,0 +1,186 @@
+"""The documentation against what it documents: the generated headline against the committed reports, the shipped
+checkpoints' configs against the machine, and every command block against the `predvla` CLI and the Makefile."""
+
+import json
+import re
+import shlex
+import shutil
+from pathlib import Path
+
+import pytest
+
+from lerobot_predvla.cli.main import build_parser
+from lerobot_predvla.cli.main import main as predvla_main
+from lerobot_predvla.experiments.headline import (
+    EXPERIMENTS,
+    HEADLINE_END,
+    HEADLINE_START,
+    README,
+    RESULTS_DOC,
+    update_docs,
+)
+from lerobot_predvla.hub.publish import without_machine_paths
+from lerobot_predvla.utils.io import atomic_write_json
+
+REPO = Path(__file__).resolve().parents[1]
+USER_DOCS = [REPO / README, *sorted((REPO / "docs").glob("*.md"))]
+
+
+def _block(path: Path) -> str:
+    text = path.read_text()
+    return text[text.index(HEADLINE_START):text.index(HEADLINE_END)]
+
+
+# ----- the headline ----------------------------------------------------------------------------------------
+def test_readme_and_results_headline_match_the_committed_reports():
+    assert update_docs(REPO, check=True) == [], "run `predvla report --docs` and commit README.md, docs/results.md"
+    assert predvla_main(["report", "--docs", "--check", "--root", str(REPO)]) == 0
+
+
+def test_headline_cells_are_the_report_json_seeds():
+    """Each cell against report.json read here directly: single seeds say n = 1, never ± 0."""
+    summary = json.loads((REPO / "results/libero_object_cpu/report.json").read_text())
+    cells = {name: summary["configs"][name]["suites"]["libero_object"] for name in ("predvla_cpu_8k", "B2")}
+    row = next(line for line in _block(REPO / README).splitlines() if "results/libero_object_cpu/report.md" in line)
+    for cell in cells.values():
+        assert cell["n"] == 1
+        assert f"| {cell['mean']:.1f} (n = 1) |" in row
+    for path in (REPO / README, REPO / RESULTS_DOC):
+        assert "± 0.0" not in _block(path) and "± 0.00" not in _block(path)
+    seeds = {}
+    wrist = json.loads((REPO / "results/libero_object_cpu_init_noise_wrist/report.json").read_text())["configs"]
+    for name in ("predvla_cpu_8k_lambda_q100_er_lambda_q1_full", "predvla_cpu_8k_lambda_q100_seeds_er_lambda_q1"):
+        seeds.update(wrist[name]["suites"]["libero_object"]["seeds"])
+    mean = sum(seeds.values()) / len(seeds)
+    assert f"{mean:.1f} ± " in _block(REPO / README) and f"(n = {len(seeds)})" in _block(REPO / README)
+
+
+def _record(config: str, seed: int, successes: int, episodes: int = 500) -> dict:
+    return {"config": config, "suite": "libero_object", "seed": seed, "successes": successes, "episodes": episodes,
+            "n_episodes_per_task": episodes // 10, "episode_length": 600, "init_states": True}
+
+
+def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
+    """The Table 2 row appears first as soon as results/libero_object_table2/report.json exists, its seeds merged."""
+    for name in ("configs", "results/libero_object_cpu/runs/records"):
+        shutil.copytree(REPO / name, tmp_path / name)
+    shutil.copy(REPO / "results/libero_object_cpu/report.json", tmp_path / "results/libero_object_cpu/report.json")
+    (tmp_path / "docs").mkdir()
+    for name in (README, RESULTS_DOC):
+        (tmp_path / name).write_text(f"intro\n{HEADLINE_START}\n{HEADLINE_END}\nend\n")
+    assert [p.name for p in update_docs(tmp_path)] == ["README.md", "results.md"]
+    before = _block(tmp_path / README)
+    assert "libero_object_cpu" in before and "Table 2" not in before.split("| paper")[1].split("\n")[1]
+
+    table2 = tmp_path / "results/libero_object_table2"
+    runs = {("predvla_table2", 0): 400, ("predvla_table2_seeds", 1): 300, ("predvla_table2_seeds", 2): 350,
+            ("predvla_table2_open_loop", 0): 380}
+    configs = {}
+    for (config, seed), successes in runs.items():
+        atomic_write_json(table2 / f"runs/records/{config}/libero_object/seed{seed}.json",
+                          _record(config, seed, successes))
+        configs.setdefault(config, {"suites": {"libero_object": {"seeds": {}}}})
+        configs[config]["suites"]["libero_object"]["seeds"][str(seed)] = successes / 5
+    atomic_write_json(table2 / "report.json", {"configs": configs})
+    update_docs(tmp_path)
+    rows = [line for line in _block(tmp_path / README).splitlines() if line.startswith("| [")]
+    assert "results/libero_object_table2/report.md" in rows[0]
+    assert "| 70.0 ± 10.0 (n = 3) | 76.0 (n = 1) | — | — |" in rows[0]  # (80 + 60 + 70) / 3; open loop seed 0
+    assert "libero_object_cpu/report.md" in rows[1]
+    assert update_docs(tmp_path, check=True) == []
+
+
+def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys):
+    shutil.copytree(REPO / "configs", tmp_path / "configs")
+    for exp in {e.results for e in EXPERIMENTS}:
+        if (REPO / "results" / exp / "report.json").is_file():
+            shutil.copytree(REPO / "results" / exp / "runs/records", tmp_path / "results" / exp / "runs/records")
+            shutil.copy(REPO / "results" / exp / "report.json", tmp_path / "results" / exp / "report.json")
+    (tmp_path / "docs").mkdir()
+    shutil.copy(REPO / README, tmp_path / README)
+    shutil.copy(REPO / RESULTS_DOC, tmp_path / RESULTS_DOC)
+    readme = tmp_path / README
+    readme.write_text(readme.read_text().replace("72.0 (n = 1)", "78.0 (n = 1)", 1))
+    assert predvla_main(["report", "--docs", "--check", "--root", str(tmp_path)]) == 1
+    assert "README.md: headline differs" in capsys.readouterr().err
+
+
+# ----- shared configs do not pin the training machine's device ---------------------------------------------
+@pytest.mark.parametrize("checkpoint", sorted(p.parent.name for p in (REPO / "checkpoints").glob("*/config.json")))
+def test_shipped_checkpoint_config_follows_the_machine(checkpoint):
+    from lerobot.configs.policies import PreTrainedConfig
+    from lerobot.utils.device_utils import auto_select_torch_device
+
+    path = REPO / "checkpoints" / checkpoint
+    assert json.loads((path / "config.json").read_text())["device"] is None
+    assert PreTrainedConfig.from_pretrained(path).device == auto_select_torch_device().type
+
+
+def test_push_clears_the_training_device(tmp_path):
+    config, train = tmp_path / "config.json", tmp_path / "train_config.json"
+    config.write_text(json.dumps({"type": "predvla", "device": "cuda", "frontend_dir": "/data/frontend"}))
+    train.write_text(json.dumps({"policy": {"type": "predvla", "device": "cpu"}, "output_dir": "/runs/x"}))
+    published = without_machine_paths({"config.json": config, "train_config.json": train})
+    assert json.loads(published["config.json"]) == {"type": "predvla", "device": None, "frontend_dir": None}
+    assert json.loads(published["train_config.json"])["policy"]["device"] is None
+
+
+# ----- every documented command exists ---------------------------------------------------------------------
+def _commands(path: Path) -> list[list[str]]:
+    """Shell commands of the ```bash blocks as words: continuation lines joined, comments dropped, split at `&&`,
+    `;`, `|` and `&`, environment assignments (OMP_NUM_THREADS=1) and wrappers (time, nice) left out."""
+    commands = []
+    for block in re.findall(r"```(?:bash|sh|shell)\n(.*?)```", path.read_text(), flags=re.S):
+        pending = ""
+        for line in re.sub(r"\\\n\s*", " ", block).splitlines():
+            lexer = shlex.shlex(pending + line, posix=True, punctuation_chars=";&|")
+            lexer.commenters = "#"
+            lexer.wordchars += "-./=[],:{}$*~@%+"
+            try:
+                tokens = list(lexer)
+            except ValueError:  # a quoted string goes on on the next line
+                pending += line + " "
+                continue
+            pending, words = "", []
+            for token in [*tokens, ";"]:
+                if token.strip(";&|"):
+                    words.append(token)
+                    continue
+                while words and (re.match(r"^[A-Z_]+=", words[0]) or words[0] in ("time", "nice", "-n", "10")):
+                    words.pop(0)
+                if words:
+                    commands.append(words)
+                words = []
+        assert not pending, f"{path}: unterminated quote in a command block: {pending}"
+    return commands
+
+
+def _make_targets() -> set[str]:
+    return set(re.findall(r"^([A-Za-z][\w-]*):", (REPO / "Makefile").read_text(), flags=re.M))
+
+
+def test_every_documented_command_exists():
+    parser, targets = build_parser(), _make_targets()
+    checked, wrong = 0, []
+    for path in USER_DOCS:
+        for words in _commands(path):
+            command, program = " ".join(words), Path(words[0]).name
+            if program == "make":
+                wrong += [f"{path.name}: `{command}`: no make target {t}" for t in words[1:] if t not in targets]
+                checked += 1
+            elif program == "predvla":
+                try:
+                    parser.parse_args([w for w in words[1:] if w != "..."])
+                except SystemExit:
+                    wrong.append(f"{path.name}: `{command}` does not parse against `predvla`'s arguments")
+                checked += 1
+    assert checked > 20
+    assert not wrong, "\n".join(wrong)
+
+
+def test_bracket_arguments_are_quoted():
+    """zsh expands an unquoted `--x=[0,1]`; every documented one is quoted."""
+    bare = [f"{path.name}: {line.strip()}" for path in USER_DOCS
+            for block in re.findall(r"```(?:bash|sh|shell)\n(.*?)```", path.read_text(), flags=re.S)
+            for line in block.splitlines() if re.search(r"(^|\s)--[\w.]+=\[", line)]
+    assert not bare, "\n".join(bare)
