@@ -351,3 +351,21 @@ def test_expert_slides_the_mug_into_the_microwave(libero):
     episode = run_episode(env, seed=0, max_steps=520)
     env.close()
     assert episode.success, episode.note
+
+
+def test_demo_start_spread_reads_the_demonstrations_first_states(libero, tmp_path):
+    """Demonstrations that start exactly at the official init states spread exactly as those do; a missing task file
+    is named."""
+    env_mod, spec = libero
+    from lerobot_predvla.data.hdf5_layout import task_file
+    from lerobot_predvla.libero.start_spread import demo_start_spread, main
+
+    path = task_file(tmp_path, spec)
+    path.parent.mkdir(parents=True)
+    with h5py.File(path, "w") as f:
+        for i, state in enumerate(env_mod.official_init_states(SUITE, TASK_ID)):
+            f.create_dataset(f"data/demo_{i}/states", data=np.stack([state, state]))
+    spread = demo_start_spread(tmp_path, SUITE, TASK_ID)
+    assert spread["demonstrations"] == spread["official"]
+    assert spread["official"]["starts"] == 50 and spread["official"]["joint_std"] > 0.005
+    assert main(["--suite", SUITE, "--demos", str(tmp_path / "elsewhere")]) == 2
