@@ -7,7 +7,8 @@ Two routes end in `upload_files` (one `HfApi.create_commit`):
 
 What is published: `config.json`, `model.safetensors`, `train_config.json`, the processors
 (`policy_preprocessor*.json/.safetensors`, `policy_postprocessor*`, which carry the front-end artefact), the
-artefact itself as `predvla_frontend/` when available, and `README.md` (the card). Never the training
+artefact itself as `predvla_frontend/` when available, `README.md` (the card) and `sha256_manifest.json` (the
+SHA-256 of every file of the commit, verified on loading). Never the training
 posteriors (`posterior_store.safetensors`) nor `training_state/` (optimizer, scheduler, RNG).
 """
 
@@ -34,6 +35,7 @@ from lerobot_predvla.policies.common.cached_features import FRONTEND_META_DIR
 from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PREDICTIVE_RUNGS
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 from lerobot_predvla.utils.checkpoints import REQUIRED_FILES, find_pretrained
+from lerobot_predvla.utils.manifest import MANIFEST_FILE, manifest_text
 from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.versions import package_version
 
@@ -469,6 +471,7 @@ def push_checkpoint(
         dataset = DatasetSummary.from_root(repo, dataset_root)
     published = without_machine_paths(files)
     published[CARD_FILE] = render_card(published, repo_id, dataset, report, report_config).encode()
+    published[MANIFEST_FILE] = manifest_text(published).encode()  # SHA-256 of every file of the commit
     if dry_run:
         return published, None
     return published, upload_files(published, repo_id, private, "Upload PredVLA policy, processors, front end, card")
@@ -494,4 +497,5 @@ def push_policy(
         published = without_machine_paths(publishable_files(stage))
         dataset = DatasetSummary.from_meta(dataset_meta) if dataset_meta is not None else None
         published[CARD_FILE] = render_card(published, repo_id, dataset).encode()
+        published[MANIFEST_FILE] = manifest_text(published).encode()
         return upload_files(published, repo_id, private, "Upload PredVLA policy weights, train config, front end, card")

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import torch
 from lerobot.policies.pretrained import PreTrainedPolicy
+from lerobot.utils.constants import TRAINING_STATE_DIR
 from torch import Tensor
 
 from lerobot_predvla.policies.common.cached_features import (
@@ -21,6 +22,8 @@ from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
 from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
+from lerobot_predvla.utils.checkpoints import kill_point
+from lerobot_predvla.utils.manifest import verify_manifests
 from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
 
 
@@ -101,6 +104,7 @@ class PredVLAPolicy(PreTrainedPolicy):
 
     def _save_pretrained(self, save_directory: Path, state_dict: dict[str, Tensor] | None = None) -> None:
         super()._save_pretrained(save_directory, state_dict=state_dict)
+        kill_point("weights-saved", Path(save_directory))  # test hook of the kill-resume harness; inert otherwise
         if self.posterior_store is not None and self._write_posteriors:
             self.posterior_store.save(Path(save_directory))  # training checkpoints only; see push_model_to_hub
 
@@ -149,7 +153,12 @@ class PredVLAPolicy(PreTrainedPolicy):
 
     @classmethod
     def _load_as_safetensor(cls, model: "PredVLAPolicy", model_file: str, map_location: str, strict: bool):
-        """Weights (and, resuming training, posteriors) read and checked whole before either is loaded."""
+        """Weights (and, resuming training, posteriors) read and checked whole before either is loaded, after the
+        checkpoint's SHA-256 manifests: `pretrained_model/` and, resuming, the `training_state/` LeRobot reads next."""
+        directory = Path(model_file).parent
+        training_state = directory.parent / TRAINING_STATE_DIR
+        resuming = model.posterior_store is not None and training_state.is_dir()
+        verify_manifests(directory, *([training_state] if resuming else []))
         state, _ = read_safetensors(model_file)
         check_tensors(model_file, state, {k: v.detach().cpu() for k, v in model.state_dict().items()})
         posteriors = None
