@@ -88,6 +88,10 @@ class PredVLAConfig(CachedFeaturesConfig):
             are slower in bfloat16 on the CPU).
         er_window: Error-regression window W in control steps (Table 2: 40).
         er_iterations: Adam iterations n_itr per control step (Table 2: 10). 0 is exact open loop.
+        er_deadline_ms: None (default): every control step runs all `er_iterations`. A value: error regression's
+            time budget per control step in milliseconds (e.g. 33 for a 30 Hz robot, minus the front end's share):
+            it runs as many of the `er_iterations` as fit, at least one, and logs how many it ran
+            (docs/robot.md measures what each budget sustains on 2 CPU cores).
         er_lr: Adam step size eta of error regression (Table 2: 0.05).
         er_complexity_weight: w_ER, the complexity weight of every module during error regression
             (Table 2: 1.0).
@@ -146,6 +150,7 @@ class PredVLAConfig(CachedFeaturesConfig):
     er_window: int = 40
     er_iterations: int = 10
     er_lr: float = 0.05
+    er_deadline_ms: float | None = None
     er_complexity_weight: float = 1.0
     er_lambda_v: float = 1.0
     er_lambda_q: float = 1.0
@@ -186,6 +191,8 @@ class PredVLAConfig(CachedFeaturesConfig):
                 f"`er_window` must be >= 1 and `er_iterations` >= 0, got {self.er_window}, {self.er_iterations}."
             )
         if self.er_corruption_channel not in (None, *CORRUPTION_CHANNELS):
+        if self.er_deadline_ms is not None and self.er_deadline_ms <= 0:
+            raise ValueError(f"`er_deadline_ms` must be > 0 milliseconds (or None), got {self.er_deadline_ms}.")
             raise ValueError(
                 f"`er_corruption_channel` must be one of {CORRUPTION_CHANNELS} or None, "
                 f"got {self.er_corruption_channel!r}."

@@ -2,6 +2,7 @@
 
 import logging
 import tempfile
+import time
 from pathlib import Path
 
 import torch
@@ -14,7 +15,7 @@ from lerobot_predvla.policies.common.cached_features import (
     has_paper_layout,
     use_dataset_frontend,
 )
-from lerobot_predvla.policies.common.observation_guard import ObservationGuard
+from lerobot_predvla.policies.common.observation_guard import REPORT_INTERVAL_S, ObservationGuard
 from lerobot_predvla.policies.common.training_guard import TrainingGuard
 from lerobot_predvla.policies.predvla.configuration_predvla import PREDVLA_PAPER_PARAMETERS, PredVLAConfig
 from lerobot_predvla.policies.predvla.corruption import ObservationCorruption
@@ -221,8 +222,11 @@ class PredVLAPolicy(PreTrainedPolicy):
     # ----- acting --------------------------------------------------------------------------------------
     def reset(self) -> None:
         """Clear the error-regression window (called at every environment reset); log the finished episode's
-        unavailable observations, if any."""
+        unavailable observations, if any, and (under `er_deadline_ms`) the iterations it ran."""
+        if getattr(self, "error_regression", None) is not None and self.error_regression.iterations.steps:
+            self.log_iterations()
         self.error_regression = ErrorRegression(self.model)
+        self.iterations_logged_at = time.monotonic()
         self.control_step = 0
         if not hasattr(self, "guard"):
             self.guard = ObservationGuard.for_policy(self.config, self.name)
@@ -248,5 +252,17 @@ class PredVLAPolicy(PreTrainedPolicy):
             # Inputs created in inference mode cannot enter autograd: clone them out of it.
             inputs = [x.clone() for x in (language, vision, proprio, vision_ok, proprio_ok)]
             action = self.error_regression(*inputs).detach()
+            if time.monotonic() - self.iterations_logged_at >= REPORT_INTERVAL_S:
+                self.log_iterations()
             return self.guard.safe_action(action, self.error_regression.prior_action.detach())
+
+    def log_iterations(self) -> None:
+        """Under `er_deadline_ms`, one line: the Adam iterations error regression ran per control step so far."""
+        self.iterations_logged_at = time.monotonic()
+        if self.config.er_deadline_ms is not None:
+            logging.info(
+                "%s: error regression within %g ms ran %s of %d iterations over %d control steps.", self.name,
+                self.config.er_deadline_ms, self.error_regression.iterations.describe(), self.config.er_iterations,
+                self.error_regression.iterations.steps,
+            )
 
