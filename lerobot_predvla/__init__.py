@@ -2,7 +2,8 @@
 
 Importing this package registers every policy type of the plugin with LeRobot (`--policy.type=predvla`,
 `predvla_bc_transformer`, `predvla_bc_rnn`, `predvla_ladder`) and the `--env.type=predvla_libero` env; it is the
-only registration point (`lerobot_policy_predvla`, the name LeRobot's plugin loader imports, re-exports it).
+only registration point (`lerobot_policy_predvla`, the name LeRobot's plugin loader imports, re-exports it). It also
+registers the `--robot.type=predvla_replay` robot and camera (a recorded episode played as a robot, docs/robot.md).
 Inside `lerobot-train` it makes checkpoints atomic and locks the output folder (utils/lerobot_train_hooks.py).
 """
 
@@ -17,11 +18,13 @@ from lerobot_predvla.policies.ladder.modeling_predvla_ladder import PredVLALadde
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
 from lerobot_predvla.policies.predvla.processor_predvla import make_predvla_pre_post_processors
+from lerobot_predvla.robots import DatasetReplayRobotConfig
 from lerobot_predvla.utils.lerobot_train_hooks import install_lerobot_train_hooks
 
 install_lerobot_train_hooks()  # inside lerobot-train only: atomic checkpoints, one training per output folder
 
 __all__ = [
+    "DatasetReplayRobotConfig",
     "POLICY_TYPES",
     "PredVLABCRNNConfig",
     "PredVLABCRNNPolicy",

@@ -114,5 +114,7 @@ def test_front_end_marks_frames_it_cannot_encode(checkpoint):  # noqa: F811
     assert vision[1].isnan().all() and not vision[[0, 2]].isnan().any()
     torch.testing.assert_close(vision[[0, 2]], expected[[0, 2]], rtol=1e-5, atol=1e-5)
     step.reset()
+    step.refresh_interval = 1  # encode every call
+    pipeline(batch)  # an episode's first observation carries every trained camera (else it stops, test_rollout.py)
     missing = pipeline({cameras[0]: images[cameras[0]], "observation.state": torch.zeros(3, 9), "task": [SOUP] * 3})
     assert missing[OBS_VISION_FEATURES].isnan().all()

@@ -9,11 +9,13 @@ corresponding observation is unavailable"), the observation-driven baselines hol
 input. With "raise" the step stops with an error naming the channel, the environment and the step.
 
 Each environment is handled on its own row: one environment's bad frame changes nothing for the others.
-Counts are kept per channel and environment and logged once per episode (at the next reset). The last line
-of defence is `safe_action`: any action row that is still non-finite is replaced by a finite fallback.
+Counts are kept per channel and environment and logged at the next reset and, while frames keep being masked,
+at least every `REPORT_INTERVAL_S` seconds (a robot's rollout may never reset). The last line of defence is
+`safe_action`: any action row that is still non-finite is replaced by a finite fallback.
 """
 
 import logging
+import time
 
 import numpy as np
 import torch
@@ -23,6 +25,7 @@ from torch import Tensor
 from .cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
 FALLBACK = "fallback_actions"  # count of non-finite actions replaced by `safe_action`
+REPORT_INTERVAL_S = 10.0  # longest time between two log lines while observations are being masked
 
 
 class BadObservationError(ValueError):
@@ -37,10 +40,15 @@ class ObservationGuard:
         dims: Their feature sizes (a missing key is filled with zeros of this size).
         mode: `on_bad_observation`, "mask" or "raise" (see the module docstring).
         name: Policy name used in messages.
+        report_interval_s: Log the counts at least this often while observations are being masked.
     """
 
-    def __init__(self, keys: tuple[str, ...], dims: tuple[int, ...], mode: str, name: str):
+    def __init__(
+        self, keys: tuple[str, ...], dims: tuple[int, ...], mode: str, name: str,
+        report_interval_s: float = REPORT_INTERVAL_S,
+    ):
         self.keys, self.dims, self.mode, self.name = keys, dims, mode, name
+        self.report_interval_s = report_interval_s
         self.totals = {key: 0 for key in (*keys, FALLBACK)}  # since construction, all episodes
         self.reset()
 
@@ -58,9 +66,11 @@ class ObservationGuard:
             self.report()
         self.counts: dict[str, np.ndarray] = {}  # per key: (batch,) number of unavailable steps
         self.step = 0
+        self.reported_at = time.monotonic()
 
     def report(self) -> str | None:
         """One log line with the current episode's counts per channel and environment; None if all clean."""
+        self.reported_at = time.monotonic()
         parts = [
             f"{'non-finite actions replaced' if key == FALLBACK else key + ' unavailable (masked)'} at "
             f"{int(c.sum())} env-steps (per env {c.tolist()})"
@@ -110,6 +120,8 @@ class ObservationGuard:
             values.append(x)
             available.append(ok)
         self.step += 1
+        if time.monotonic() - self.reported_at >= self.report_interval_s:
+            self.report()  # logs only if something was masked; an endless episode is reported as it goes
         return values, available
 
     def safe_action(self, action: Tensor, fallback: Tensor | None = None) -> Tensor:

@@ -5,14 +5,20 @@ At each control step: append the observation, initialise the newest posteriors f
 with the network frozen, regenerating the states from the window start after each update, and decode
 the action from A_bottom. With zero iterations no observation is ever read: exact open loop.
 
+With a time budget (`er_deadline_ms`), a control step runs as many of the `er_iterations` as fit in the budget
+from the step's start, at least one: the next iteration runs only if the mean time of those already run still
+fits. The counts are kept (`iterations`) for the policy to log.
+
 Unavailable observations (`ObservationGuard`) arrive as zero rows with an availability flag per environment:
 their prediction-error terms are weighted by 0 in the free energy, so they never reach the posteriors or the
 state. Should an environment's posteriors still become non-finite, they revert to their values before the
 update (its prediction for this step), and `prior_action` holds the open-loop action as a finite fallback.
 """
 
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import ClassVar
 
 import torch
@@ -54,6 +60,25 @@ class WindowAdam:
         self.param.addcdiv_(self.exp_avg, denom, value=-self.lr / (1 - beta1**self.steps))
 
 
+@dataclass
+class IterationCounts:
+    """Adam iterations run per control step (error regression with a time budget runs fewer than configured)."""
+
+    steps: int = 0
+    total: int = 0
+    fewest: int | None = None
+    most: int = 0
+
+    def add(self, iterations: int) -> None:
+        self.steps += 1
+        self.total += iterations
+        self.fewest = iterations if self.fewest is None else min(self.fewest, iterations)
+        self.most = max(self.most, iterations)
+
+    def describe(self) -> str:
+        return f"{self.total / max(self.steps, 1):.1f} per control step (fewest {self.fewest}, most {self.most})"
+
+
 class ErrorRegression:
     """Sliding-window posterior inference for a batch of parallel episodes.
 
@@ -87,6 +112,7 @@ class ErrorRegression:
         self.proprio_weight: list[Tensor] = []
         self.prior_action: Tensor | None = None  # open-loop action of the newest step
         self.reverted = 0  # environment-steps whose posteriors became non-finite and were reverted
+        self.iterations = IterationCounts()
 
     def free_energy(self, traj: Trajectory, c_q: Tensor) -> Tensor:
         """E over the window (Eq. 9) with the inference weights w_ER, er_lambda_v, er_lambda_q."""
@@ -101,13 +127,14 @@ class ErrorRegression:
         vision_available: Tensor | None = None, proprio_available: Tensor | None = None,
     ) -> Tensor:
         """One control step for a batch; returns the action (batch, action_dim) in normalised units."""
+        started = time.perf_counter()
         open_loop_action = self.observe(language, vision, proprio, vision_available, proprio_available)
         if open_loop_action is not None:
             if self.tracer is not None:
                 self.tracer(self, None, open_loop_action)
             return open_loop_action
         before = torch.stack(self.posteriors) if self.tracer is not None else None
-        self.infer()
+        self.infer(started)
         action = self.act()
         if self.tracer is not None:
             self.tracer(self, before, action)
@@ -157,16 +184,24 @@ class ErrorRegression:
             c_q = torch.stack(self.posteriors)
             return self.free_energy(self.rollout(self.start_state, self.lang_term, c_q), c_q)
 
-    def infer(self) -> None:
-        """Step 2: n_itr Adam steps on the window's posteriors, network frozen, states regenerated."""
+    def infer(self, started: float | None = None) -> None:
+        """Step 2: n_itr Adam steps on the window's posteriors, network frozen, states regenerated; under
+        `er_deadline_ms`, only those that fit in the budget from `started` (default: now), at least one."""
         before = torch.stack(self.posteriors)
         c_q = before.clone().requires_grad_(True)
         adam = WindowAdam(c_q, self.config.er_lr)
+        budget = self.config.er_deadline_ms
+        started = time.perf_counter() if started is None else started
+        begin, done = time.perf_counter(), 0
         with frozen(self.model):
-            for _ in range(self.config.er_iterations):
+            for done in range(1, self.config.er_iterations + 1):
                 traj = self.rollout(self.start_state, self.lang_term, c_q)
                 (grad,) = torch.autograd.grad(self.free_energy(traj, c_q), c_q)
                 adam.step(grad)
+                now = time.perf_counter()
+                if budget is not None and (now - started + (now - begin) / done) * 1e3 > budget:
+                    break  # the next iteration would likely end past the budget
+        self.iterations.add(done)
         c_q = c_q.detach()
         diverged = ~torch.isfinite(c_q).all(dim=0).all(dim=-1)  # (batch,)
         if bool(diverged.any()):

@@ -24,7 +24,7 @@ def frontend_step(config: CachedFeaturesConfig) -> FrontendProcessorStep:
             f"{config.frontend_dir}: the front end encodes {len(artefact.cameras)} cameras {list(artefact.cameras)}, "
             f"the policy was built for {config.num_cameras} (its '{OBS_VISION_FEATURES}' features)."
         )
-    return FrontendProcessorStep.from_artefact(artefact)
+    return FrontendProcessorStep.from_artefact(artefact, refresh_interval=config.visual_refresh_interval)
 
 
 def make_predvla_pre_post_processors(
@@ -34,10 +34,10 @@ def make_predvla_pre_post_processors(
     PolicyProcessorPipeline[dict[str, Any], dict[str, Any]],
     PolicyProcessorPipeline[PolicyAction, PolicyAction],
 ]:
-    """Input: rename -> batch dim -> front end -> device -> normalise. Output: unnormalise -> cpu.
+    """Input: rename -> batch dim -> device -> front end -> normalise. Output: unnormalise -> cpu.
 
-    LeRobot's default steps (`make_default_policy_processor_steps`) with the front end inserted before the
-    device step.
+    LeRobot's default steps (`make_default_policy_processor_steps`) with the front end inserted after the
+    device step, so that its encoders run on the policy's device (`--policy.device`).
     The front-end step turns live environment observations into the cached features (training batches
     already have them) and carries the artefact of `config.frontend_dir` into the checkpoint. The inputs
     are the cached front-end features: PCA outputs and raw proprioception pass through
@@ -46,6 +46,6 @@ def make_predvla_pre_post_processors(
     """
     s = make_default_policy_processor_steps(config, dataset_stats)
     return make_policy_processor_pipelines(
-        input_steps=[s.rename_observations, s.add_batch_dim, frontend_step(config), s.to_device, s.normalize],
+        input_steps=[s.rename_observations, s.add_batch_dim, s.to_device, frontend_step(config), s.normalize],
         output_steps=[s.unnormalize, s.to_cpu],
     )
