@@ -23,7 +23,7 @@ from lerobot_predvla.hub.publish import without_machine_paths
 from lerobot_predvla.utils.io import atomic_write_json
 
 REPO = Path(__file__).resolve().parents[1]
-USER_DOCS = [REPO / README, *sorted((REPO / "docs").glob("*.md"))]
+DOCS = [REPO / README, *sorted((REPO / "docs").glob("*.md")), *sorted((REPO / "docs/research").glob("*.md"))]
 
 
 def _block(path: Path) -> str:
@@ -102,7 +102,7 @@ def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys
     readme = tmp_path / README
     readme.write_text(readme.read_text().replace("72.0 (n = 1)", "78.0 (n = 1)", 1))
     assert predvla_main(["report", "--docs", "--check", "--root", str(tmp_path)]) == 1
-    assert "README.md: headline differs" in capsys.readouterr().err
+    assert "README.md: differs" in capsys.readouterr().err
 
 
 # ----- shared configs do not pin the training machine's device ---------------------------------------------
@@ -162,7 +162,7 @@ def _make_targets() -> set[str]:
 def test_every_documented_command_exists():
     parser, targets = build_parser(), _make_targets()
     checked, wrong = 0, []
-    for path in USER_DOCS:
+    for path in DOCS:
         for words in _commands(path):
             command, program = " ".join(words), Path(words[0]).name
             if program == "make":
@@ -180,7 +180,33 @@ def test_every_documented_command_exists():
 
 def test_bracket_arguments_are_quoted():
     """zsh expands an unquoted `--x=[0,1]`; every documented one is quoted."""
-    bare = [f"{path.name}: {line.strip()}" for path in USER_DOCS
+    bare = [f"{path.name}: {line.strip()}" for path in DOCS
             for block in re.findall(r"```(?:bash|sh|shell)\n(.*?)```", path.read_text(), flags=re.S)
             for line in block.splitlines() if re.search(r"(^|\s)--[\w.]+=\[", line)]
     assert not bare, "\n".join(bare)
+
+
+# ----- model cards of the shipped checkpoints --------------------------------------------------------------
+def test_shipped_model_cards_are_rendered_from_their_checkpoints():
+    from lerobot_predvla.experiments.headline import stale_cards
+
+    assert stale_cards(REPO) == {}, "run `predvla report --docs` and commit checkpoints/*/README.md"
+
+
+def test_model_card_states_the_checkpoints_own_training_and_results():
+    from lerobot_predvla.hub.publish import evaluation_records
+
+    checkpoint = REPO / "checkpoints/predvla_libero_object"
+    card = (checkpoint / "README.md").read_text()
+    config = json.loads((checkpoint / "config.json").read_text())
+    train_cfg = json.loads((checkpoint / "train_config.json").read_text())
+    frontend = json.loads((checkpoint / "predvla_frontend/frontend.json").read_text())
+    assert f"Trained for {train_cfg['steps']:,} steps, batch size {train_cfg['batch_size']}, seed 0." in card
+    assert f"optimizer_lr = {config['optimizer_lr']:g} (Table 2: 6e-05)" in card
+    assert frontend["vision"]["weights_description"] in card and "RANDOM" in card
+    assert "--policy.path=checkpoints/predvla_libero_object " in card and "pip install" not in card
+    records = evaluation_records(checkpoint, REPO / "results")
+    assert {r["config"] for r in records} >= {"predvla_cpu_8k", "predvla_cpu_8k_open_loop"}
+    for record in records:  # every evaluation, with its own totals and protocol
+        assert f"`{record['config']}` |" in card and f"{record['successes']}/{record['episodes']}" in card
+    assert "No evaluation results" not in card

@@ -1,5 +1,6 @@
 """`predvla report`: paper-format tables, figures and a Markdown report from the records of `predvla sweep`; with
-`--docs`, the headline results table of README.md and docs/results.md from the committed results/*/report.json."""
+`--docs`, the headline results table of README.md and docs/results.md from the committed results/*/report.json and
+the model cards of the committed checkpoints."""
 
 import argparse
 import sys
@@ -21,7 +22,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, help="Report directory (report.md, report.json, PNGs).")
     parser.add_argument("--docs", action="store_true",
                         help=f"Rewrite the headline block of {README} and {RESULTS_DOC} from results/*/report.json "
-                             "(no RUNS_DIR).")
+                             "and the model cards of checkpoints/*/ (no RUNS_DIR).")
     parser.add_argument("--check", action="store_true",
                         help="With --docs: change nothing; exit 1 when a headline block differs from the reports.")
     parser.add_argument("--root", type=Path, default=Path("."),
@@ -49,8 +50,8 @@ def _docs(args: argparse.Namespace) -> int:
     changed = update_docs(args.root, check=args.check)
     if args.check:
         for path in changed:
-            print(f"predvla report: {path}: headline differs from results/*/report.json; run `predvla report --docs`.",
-                  file=sys.stderr)
+            print(f"predvla report: {path}: differs from what the committed reports and checkpoints give; run "
+                  "`predvla report --docs`.", file=sys.stderr)
         return 1 if changed else 0
-    print(f"predvla report: headline {'rewritten in ' + ', '.join(map(str, changed)) if changed else 'unchanged'}")
+    print(f"predvla report: {'rewrote ' + ', '.join(map(str, changed)) if changed else 'documents unchanged'}")
     return 0

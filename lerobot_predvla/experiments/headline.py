@@ -10,7 +10,8 @@ file (demonstrations, front end, training recipe against PredVLAConfig's Table 2
 the table once its `report.json` is committed.
 
 `predvla report --docs` rewrites the block between HEADLINE_START and HEADLINE_END in README.md (the summary table)
-and docs/results.md (the summary table and a per-seed table); `--check` fails when either differs.
+and docs/results.md (the summary table and a per-seed table), and the model card of every checkpoint under
+checkpoints/ (`lerobot_predvla.hub.publish.repository_card`); `--check` fails when any differs.
 """
 
 import json
@@ -135,8 +136,12 @@ def _cell(results_dir: Path, summary: dict, configs: tuple[str, ...]) -> Cell:
     return Cell(dict(sorted(rates.items())), dict(sorted(records.items())))
 
 
-def _fmt(value: float) -> str:
-    return f"{int(value):,}" if float(value).is_integer() else f"{value:g}"
+def _fmt(value) -> str:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    return f"{int(value):,}" if value.is_integer() else f"{value:g}"
 
 
 def _policy_fields(sweep: Sweep, config: str, seen: frozenset = frozenset()) -> tuple[dict[str, str], int]:
@@ -151,22 +156,35 @@ def _policy_fields(sweep: Sweep, config: str, seen: frozenset = frozenset()) -> 
     return {**trained, **{k: str(v) for k, v in spec.eval_overrides.items()}}, steps
 
 
-def _differs(value: str, default) -> bool:
+def _differs(value, default) -> bool:
+    if isinstance(value, list | tuple) or isinstance(default, list | tuple):
+        return not (isinstance(value, list | tuple) and isinstance(default, list | tuple) and len(value) == len(default)
+                    and not any(_differs(v, d) for v, d in zip(value, default, strict=True)))
     try:
         return float(value) != float(default)
     except (TypeError, ValueError):
         return str(value) != str(default)
 
 
+def config_departures(values: dict) -> list[str]:
+    """`field = value (Table 2: default)` for every recipe field of a policy config (`config.json`, or `--policy.*`
+    values with `type`) that differs from its config class's default (PredVLA's are Table 2's)."""
+    from lerobot.configs.policies import PreTrainedConfig
+
+    import lerobot_predvla  # noqa: F401  (registers the plugin's config classes)
+
+    config_cls = PreTrainedConfig.get_choice_class(values["type"])
+    defaults = {f.name: f.default for f in fields(config_cls) if f.default is not MISSING_DEFAULT}
+    label = "Table 2" if values["type"] == "predvla" else "default"
+    return [f"{k} = {_fmt(v)} ({label}: {_fmt(defaults[k])})"
+            for k, v in sorted(values.items())
+            if k in defaults and k not in NOT_RECIPE and _differs(v, defaults[k])]
+
+
 def recipe_departures(sweep: Sweep, config: str) -> list[str]:
     """What the training and inference settings of a PredVLA configuration change from Table 2."""
-    from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
-
-    defaults = {f.name: f.default for f in fields(PredVLAConfig) if f.default is not MISSING_DEFAULT}
     values, steps = _policy_fields(sweep, config)
-    out = [f"{k} = {v} (Table 2: {_fmt(defaults[k]) if isinstance(defaults[k], float | int) else defaults[k]})"
-           for k, v in sorted(values.items())
-           if k in defaults and k not in NOT_RECIPE and _differs(v, defaults[k])]
+    out = config_departures(values)
     batch = sweep.settings.batch_size
     if steps != PAPER_TRAIN_STEPS or batch != PAPER_BATCH_SIZE:
         out.insert(0, f"{steps:,} steps at batch {batch} (Table 2: {PAPER_TRAIN_STEPS:,} at {PAPER_BATCH_SIZE})")
@@ -310,9 +328,22 @@ def replace_block(text: str, block: str, path: Path) -> str:
     return text[:start] + block + text[end + len(HEADLINE_END):]
 
 
+def stale_cards(root: Path) -> dict[Path, str]:
+    """The model card (README.md) of each checkpoint under `root/checkpoints/` that differs from its rendering from
+    the checkpoint's config, training record and evaluations."""
+    from lerobot_predvla.hub.publish import CARD_FILE, repository_card
+
+    stale = {}
+    for config in sorted((Path(root) / "checkpoints").glob("*/config.json")):
+        path, card = config.parent / CARD_FILE, repository_card(config.parent, root)
+        if not path.is_file() or path.read_text() != card:
+            stale[path] = card
+    return stale
+
+
 def update_docs(root: Path, check: bool = False) -> list[Path]:
-    """Rewrite (or, with `check`, compare) the headline blocks; returns the files that differ(ed). Every file is
-    read and checked before any is written."""
+    """Rewrite (or, with `check`, compare) the headline blocks and the shipped checkpoints' model cards; returns the
+    files that differ(ed). Every file is read and checked before any is written."""
     rows = build_rows(root)
     new = {}
     for name, prefix, detailed in ((README, "", False), (RESULTS_DOC, "../", True)):
@@ -323,6 +354,7 @@ def update_docs(root: Path, check: bool = False) -> list[Path]:
         updated = replace_block(text, render(rows, prefix, detailed), path)
         if updated != text:
             new[path] = updated
+    new.update(stale_cards(root))
     if not check:
         for path, text in new.items():
             atomic_write_text(path, text)

@@ -272,7 +272,8 @@ def episodes_table(summary: dict) -> str | None:
 def fmt_cell(cell: dict) -> str:
     if cell["n"] == 0:
         return f"{MISSING} (0/{cell['planned']})" if cell["planned"] else MISSING
-    text = f"{cell['mean']:.2f} ± {cell['std']:.2f}"
+    # One seed has no spread to show: "72.00 (n = 1)", never "± 0.00".
+    text = f"{cell['mean']:.2f} ± {cell['std']:.2f}" if cell["n"] > 1 else f"{cell['mean']:.2f} (n = 1)"
     return text + (f" ({cell['n']}/{cell['planned']} seeds)" if cell["n"] < cell["planned"] else "")
 
 
@@ -683,7 +684,8 @@ def write_report(runs_dir: Path, out: Path) -> dict:
         "# PredVLA experiment report",
         "",
         f"{len(records)} runs from `{runs_dir}`; protocol: {summary['protocol']}. Success rates in %, mean ± "
-        f"standard deviation across seeds; {MISSING} marks a missing result, (k/n seeds) a partial one.",
+        f"standard deviation across seeds (n = 1: a single seed); {MISSING} marks a missing result, (k/n seeds) a "
+        "partial one.",
     ]
     for title, table, figure, note in (
         ("Main results", main_table(summary), None, "3-suite mean: spatial, goal, object; 4-suite adds long."),

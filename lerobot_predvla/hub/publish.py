@@ -52,6 +52,9 @@ RESNET18_BACKBONE_PARAMS = 11_176_512
 MINILM_PARAMS = 22_713_216
 FRONTEND_STEP = "predvla_frontend_processor"
 MACHINE_FIELDS = ("frontend_dir", "device")  # policy config fields that name the training machine's resources
+# Config fields that hold the paper's training length and batch, not this run's (the card's Training data has those).
+PAPER_ONLY_FIELDS = ("train_steps", "train_batch_size")
+PAPER_ONLY_NOTE = " (the paper's value; this run's: Training data)"
 _LEFTOVER = re.compile(r"\$\{?[A-Za-z_][A-Za-z0-9_]*\}?|\{\{|\}\}")
 _FEATURE_MEANING = {
     "observation.vision_features": "ResNet18 features of each camera, PCA per camera (cached or computed by the "
@@ -193,12 +196,47 @@ def _suite_of(dataset_repo_id: str) -> str | None:
     return next((s for s in sorted(SUITES, key=len, reverse=True) if s in dataset_repo_id), None)
 
 
-def eval_command(repo_id: str, suite: str) -> str:
+def eval_command(policy_path: str, suite: str) -> str:
+    """The paper's protocol for `policy_path` (a Hub repo or a local directory); LeRobot picks the device."""
     return (
-        f"lerobot-eval --policy.path={repo_id} --env.type={EVAL_ENV_TYPE} --env.task={suite} "
+        f"lerobot-eval --policy.path={policy_path} --env.type={EVAL_ENV_TYPE} --env.task={suite} "
         f"--env.episode_length={PAPER_EPISODE_LENGTH} --eval.n_episodes={PAPER_EPISODES_PER_TASK} "
-        "--eval.batch_size=1 --eval.use_async_envs=false --policy.device=cuda --output_dir=outputs/eval"
+        "--eval.batch_size=1 --eval.use_async_envs=false --output_dir=outputs/eval"
     )
+
+
+# ----- evaluation records of a checkpoint -----------------------------------------------------------------
+def _flag(command: list[str], name: str) -> str | None:
+    return next((w.split("=", 1)[1] for w in command if w.startswith(f"{name}=")), None)
+
+
+def training_processes(command: list[str]) -> int:
+    """Processes of a recorded training command (`torchrun --nproc_per_node=N`, `accelerate --num_processes=N`)."""
+    value = _flag(command, "--nproc_per_node") or _flag(command, "--num_processes")
+    return int(value) if value else 1
+
+
+def evaluation_records(checkpoint: Path, results_root: Path) -> list[dict]:
+    """The `predvla sweep` run records under `results_root/*/runs/records/` that evaluated `checkpoint`: those whose
+    `checkpoint` is this directory, and those whose training (job name, dataset and seed) is the one its
+    `train_config.json` records (a checkpoint copied out of a sweep's runs directory)."""
+    checkpoint = Path(checkpoint).resolve()
+    train_cfg_path = checkpoint / "train_config.json"
+    train_cfg = json.loads(train_cfg_path.read_text()) if train_cfg_path.is_file() else {}
+    found = []
+    for path in sorted(Path(results_root).glob("*/runs/records/*/*/seed*.json")):
+        record = json.loads(path.read_text())
+        runs_dir = path.parents[3]
+        recorded = record.get("checkpoint")
+        train = (record.get("commands") or {}).get("train") or []
+        same_dir = recorded is not None and (runs_dir / recorded).resolve() == checkpoint
+        same_training = bool(train_cfg) and (
+            _flag(train, "--job_name") == train_cfg.get("job_name")
+            and _flag(train, "--dataset.repo_id") == train_cfg.get("dataset", {}).get("repo_id")
+            and int(record["seed"]) == train_cfg.get("seed"))
+        if same_dir or same_training:
+            found.append({**record, "results": str(runs_dir.parent.relative_to(Path(results_root).parent))})
+    return found
 
 
 def _frontend_section(meta: dict | None) -> tuple[str, str]:
@@ -247,7 +285,8 @@ def _format_fit(fit: dict) -> str:
     return "; ".join(parts) or "not recorded"
 
 
-def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None) -> str:
+def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None, config: dict,
+                      records: list[dict] | None) -> str:
     lines = []
     if dataset is not None:
         tasks = "; ".join(dataset.tasks[:12]) + ("; ..." if len(dataset.tasks) > 12 else "")
@@ -260,19 +299,52 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None) ->
             f"| tasks | {len(dataset.tasks)}: {tasks} |",
         ]
     elif train_cfg is not None:
-        lines.append(f"Dataset `{train_cfg['dataset']['repo_id']}` (its metadata was not available when publishing).")
+        lines.append(f"Dataset `{train_cfg['dataset']['repo_id']}` (its metadata was not available when the card was "
+                     "written; the front end's fit above counts its demonstrations).")
     else:
         lines.append("The training dataset was not recorded with this checkpoint.")
+    trained = [r for r in records or [] if (r.get("commands") or {}).get("train")]
     if train_cfg is not None:
-        lines += [
-            "",
-            f"Trained for {train_cfg['steps']:,} steps, batch size {train_cfg['batch_size']}, "
-            f"seed {train_cfg['seed']}.",
-        ]
+        steps = trained[0]["steps"] if trained else train_cfg["steps"]
+        processes = training_processes(trained[0]["commands"]["train"]) if trained else 1
+        batch = f"batch size {train_cfg['batch_size']}" + (
+            f" per process, {processes} processes ({train_cfg['batch_size'] * processes} per step)"
+            if processes > 1 else "")
+        planned = f" (its training configuration planned {train_cfg['steps']:,})" if steps != train_cfg["steps"] else ""
+        lines += ["", f"Trained for {steps:,} steps{planned}, {batch}, seed {train_cfg['seed']}."]
+    from lerobot_predvla.experiments.headline import config_departures
+
+    departures = config_departures(config)
+    if departures:
+        lines += ["", "Departures from the configuration class's defaults (for PredVLA: the paper's Table 2): "
+                  + "; ".join(departures) + "."]
     return "\n".join(lines)
 
 
-def _results_section(report: Path | None, config_name: str | None) -> str:
+def _records_section(records: list[dict]) -> str:
+    """Every evaluation of the checkpoint, from its run records (per-task successes from its eval_info.json)."""
+    lines = [
+        "Every evaluation of this checkpoint with `lerobot-eval --env.type=predvla_libero`, from the run records of "
+        "`predvla sweep` (successes per task from each run's `eval_info.json`):",
+        "",
+        "| configuration | inference | starts | episodes per task | step cap | successes per task | total |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in sorted(records, key=lambda r: (r["results"], r["config"])):
+        overrides = {k: v for k, v in (r.get("eval_overrides") or {}).items() if k != "recurrence_backend"}
+        inference = ", ".join(f"`{k}={v}`" for k, v in overrides.items()) or "as trained"
+        starts = ("official init states" if r.get("init_states", True) is not False
+                  else f"randomised resets (seed {r.get('eval_seed')})")
+        tasks = ", ".join(str(t["successes"]) for _, t in sorted(r["tasks"].items(), key=lambda kv: int(kv[0])))
+        lines.append(f"| `{r['results']}` `{r['config']}` | {inference} | {starts} | {r['n_episodes_per_task']} | "
+                     f"{r['episode_length']} | {tasks} | {r['successes']}/{r['episodes']} "
+                     f"({100 * r['successes'] / r['episodes']:.1f}%) |")
+    return "\n".join(lines)
+
+
+def _results_section(report: Path | None, config_name: str | None, records: list[dict] | None = None) -> str:
+    if records:
+        return _records_section(records)
     if report is None:
         return "No evaluation results were attached when publishing (`predvla push --results REPORT_DIR`)."
     summary = load_summary(report)
@@ -289,7 +361,8 @@ def _results_section(report: Path | None, config_name: str | None) -> str:
         "|---|---|---|",
     ]
     for suite, cell in entry["suites"].items():
-        value = f"{cell['mean']:.2f} +/- {cell['std']:.2f}" if cell["n"] else "not run"
+        value = (f"{cell['mean']:.2f} +/- {cell['std']:.2f}" if cell["n"] > 1
+                 else f"{cell['mean']:.2f}" if cell["n"] else "not run")
         lines.append(f"| {suite} | {value} | {cell['n']} |")
     for key, label in (("mean3", "3-suite mean"), ("mean4", "4-suite mean")):
         if entry.get(key) is not None:
@@ -372,8 +445,11 @@ def render_card(
     dataset: DatasetSummary | None = None,
     report: Path | None = None,
     report_config: str | None = None,
+    records: list[dict] | None = None,
 ) -> str:
-    """The model card for the files about to be published, with every value filled in."""
+    """The model card for the files about to be published, with every value filled in. `repo_id` is where a reader
+    loads it from (a Hub repo, or a directory of this repository); `records`: its evaluations (`evaluation_records`),
+    shown instead of a report's aggregate."""
     config = read_json(files, "config.json")
     train_cfg = read_json(files, "train_config.json") if "train_config.json" in files else None
     dataset_repo_id = dataset.repo_id if dataset else (train_cfg["dataset"]["repo_id"] if train_cfg else "unknown")
@@ -402,12 +478,14 @@ def render_card(
             for key, ft in features.items()
         ),
         "frontend_section": frontend_section,
-        "training_section": _training_section(dataset, train_cfg),
-        "config_rows": "\n".join(f"| `{k}` | {_format_value(config[k])} |" for k in own_fields if k in config),
+        "training_section": _training_section(dataset, train_cfg, config, records),
+        "config_rows": "\n".join(
+            f"| `{k}` | {_format_value(config[k])}{PAPER_ONLY_NOTE if k in PAPER_ONLY_FIELDS else ''} |"
+            for k in own_fields if k in config),
         "eval_command": eval_command(repo_id, _suite_of(dataset_repo_id) or "libero_object"),
         "episodes_per_task": str(PAPER_EPISODES_PER_TASK),
         "episode_length": str(PAPER_EPISODE_LENGTH),
-        "results_section": _results_section(report, report_config),
+        "results_section": _results_section(report, report_config, records),
         "extra_limitations": "" if _suite_of(dataset_repo_id) else (
             f"- The training dataset `{dataset_repo_id}` is not a LIBERO suite: the evaluation command above is "
             "only the protocol's form."
@@ -423,6 +501,15 @@ def render_card(
 
 
 # ----- upload ----------------------------------------------------------------------------------------------
+def repository_card(checkpoint: Path, root: Path) -> str:
+    """The model card of a checkpoint directory committed in this repository (`root`): loaded from its path, with
+    every evaluation recorded under `root/results/`. `predvla report --docs` writes it as the checkpoint's README.md."""
+    checkpoint, root = Path(checkpoint).resolve(), Path(root).resolve()
+    files = without_machine_paths(publishable_files(checkpoint))
+    return render_card(files, checkpoint.relative_to(root).as_posix(),
+                       records=evaluation_records(checkpoint, root / "results"))
+
+
 def upload_files(
     files: dict[str, Path | bytes], repo_id: str, private: bool | None, commit_message: str, token: str | None = None
 ) -> str:
