@@ -70,7 +70,7 @@ def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
         (tmp_path / name).write_text(f"intro\n{HEADLINE_START}\n{HEADLINE_END}\nend\n")
     assert [p.name for p in update_docs(tmp_path)] == ["README.md", "results.md"]
     before = _block(tmp_path / README)
-    assert "libero_object_cpu" in before and "Table 2" not in before.split("| paper")[1].split("\n")[1]
+    assert "results/libero_object_cpu/report.md" in before and "libero_object_table2" not in before
 
     table2 = tmp_path / "results/libero_object_table2"
     runs = {("predvla_table2", 0): 400, ("predvla_table2_seeds", 1): 300, ("predvla_table2_seeds", 2): 350,

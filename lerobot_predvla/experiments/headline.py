@@ -291,10 +291,11 @@ def plain_sentence(rows: list[Row]) -> str:
                "these runs do not reproduce the paper's ordering.") + "\n")
 
 
-def departures_text(rows: list[Row]) -> list[str]:
+def departures_text(rows: list[Row], prefix: str) -> list[str]:
     common = [d for d in rows[0].departures if all(d in r.departures for r in rows)]
+    starts = f"[starts]({prefix}docs/glossary.md#official-init-states)"
     lines = ["Departures from the paper in every row: libero_object only (the paper: four suites); "
-             + "; ".join(common) + ". Further departures and the evaluation protocol of each row:", ""]
+             + "; ".join(common) + f". The evaluation {starts} and further departures of each row:", ""]
     for row in rows:
         own = [d for d in row.departures if d not in common]
         lines.append(f"- {row.experiment.recipe}, {row.demonstrations}: {row.protocol}"
@@ -314,7 +315,7 @@ def seed_table(rows: list[Row]) -> str:
 
 
 def render(rows: list[Row], prefix: str, detailed: bool) -> str:
-    parts = [HEADLINE_START, "", summary_table(rows, prefix), "", plain_sentence(rows), *departures_text(rows)]
+    parts = [HEADLINE_START, "", summary_table(rows, prefix), "", plain_sentence(rows), *departures_text(rows, prefix)]
     if detailed:
         parts += ["", "Every seed behind the table (its run record under `results/<row>/runs/records/`):", "",
                   seed_table(rows)]
