@@ -22,6 +22,7 @@ from lerobot_predvla.experiments.kill_resume import (
     run_harness,
     train_command,
 )
+from lerobot_predvla.hub.publish import push_checkpoint
 from lerobot_predvla.utils.checkpoints import (
     kill_point,
     remove_leftovers,
@@ -198,3 +199,17 @@ def test_a_second_training_on_a_held_output_folder_refuses_naming_the_holder(har
     probe = subprocess.run([sys.executable, "-c", "import sys; from lerobot_predvla.utils.run_lock import "
                             "lock_output_dir; lock_output_dir(sys.argv[1])", str(out)], timeout=120)
     assert probe.returncode == 0
+
+
+@pytest.mark.slow
+def test_a_pushed_checkpoint_carries_the_manifest_of_its_files(harness, tmp_path):
+    cfg, _ = harness
+    published, _ = push_checkpoint(checkpoint_dir(Path(cfg.output_dir), cfg.steps), "me/predvla", dry_run=True)
+    assert set(json.loads(published[MANIFEST_FILE])["files"]) == set(published) - {MANIFEST_FILE}
+    for rel, src in published.items():  # the repository as a user downloads it verifies
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_bytes(src if isinstance(src, bytes) else Path(src).read_bytes())
+    assert verify_manifests(tmp_path)
+    (tmp_path / "README.md").write_text("edited")
+    with pytest.raises(CheckpointError, match="README.md: truncated"):
+        verify_manifests(tmp_path)
