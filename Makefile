@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install sysdeps test test-fast lint demo synthetic-demo libero
+.PHONY: install sysdeps build test test-fast lint demo synthetic-demo libero
 
 $(PY):
 	PYENV_VERSION=3.12.1 python3.12 -m venv $(VENV) || python3.12 -m venv $(VENV)
@@ -19,7 +19,12 @@ sysdeps:
 	@command -v ffmpeg >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq ffmpeg >/dev/null; } \
 	  || echo "WARNING: could not install ffmpeg; LeRobot will decode video with pyav"
 
-install: $(STAMP) sysdeps
+# The C++ error-regression loops (recurrence_backend="auto"), compiled once per Python and torch version, so that
+# no rollout waits on the build; without a compiler it says so and the Python loops run.
+build: $(STAMP)
+	$(VENV)/bin/predvla build
+
+install: $(STAMP) sysdeps build
 
 # The whole suite, simulator included (what CI runs).
 test: install libero

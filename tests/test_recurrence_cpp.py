@@ -159,3 +159,53 @@ def test_non_finite_values_propagate_as_in_python():
     for python, cpp in zip(*outputs, strict=True):
         assert not python[:, 0].isfinite().all() and python[:, 1].isfinite().all()
         torch.testing.assert_close(cpp, python, rtol=0, atol=1e-5, equal_nan=True)
+
+
+def test_auto_is_the_default_and_picks_the_loops_by_device_and_dtype():
+    """"auto" runs the compiled loops on CPU float32/float64 where they build here, the Python loops otherwise;
+    "python" (what configs saved before "auto" hold) keeps the Python loops."""
+    assert PredVLAConfig(device="cpu").recurrence_backend == "auto"
+    python = recurrence_cpp.python_recurrence
+    assert recurrence_cpp.loops("python", torch.zeros(1)) is python
+    assert recurrence_cpp.loops("auto", torch.zeros(1, dtype=torch.bfloat16)) is python
+    if recurrence_cpp.missing_toolchain() is None:
+        assert recurrence_cpp.loops("auto", torch.zeros(1)) is recurrence_cpp.recurrence
+        assert recurrence_cpp.loops("auto", torch.zeros(1, dtype=torch.float64)) is recurrence_cpp.recurrence
+
+
+def test_auto_falls_back_to_the_python_loops_with_the_compiler_hidden(monkeypatch, tmp_path, caplog):
+    """Without a C++ compiler "auto" builds nothing, says why in one log line and acts as the Python loops do."""
+    monkeypatch.setenv("CXX", str(tmp_path / "no-such-c++"))
+    monkeypatch.setenv("TORCH_EXTENSIONS_DIR", str(tmp_path / "extensions"))
+    recurrence_cpp.auto_uses_cpp.cache_clear()
+    try:
+        actions = []
+        with caplog.at_level("INFO"):
+            for backend in ("auto", "python"):
+                model = randomised_model(PredVLAConfig(device="cpu", er_window=4, er_iterations=3,
+                                                       recurrence_backend=backend))
+                language, obs = control_stream(model.config, batch=2, steps=6)
+                er = ErrorRegression(model)
+                actions.append(torch.stack([er(language, v, q) for v, q in obs]))
+        assert torch.equal(actions[0], actions[1])
+        lines = [r.getMessage() for r in caplog.records if "recurrence_backend='auto'" in r.getMessage()]
+        assert len(lines) == 1 and "no C++ compiler" in lines[0] and "no-such-c++" in lines[0]
+        assert not (tmp_path / "extensions").exists()
+    finally:
+        recurrence_cpp.auto_uses_cpp.cache_clear()
+
+
+def test_predvla_build_reports_a_missing_compiler_and_exits_0(monkeypatch, tmp_path, capsys):
+    from lerobot_predvla.cli.main import main
+
+    monkeypatch.setenv("CXX", str(tmp_path / "no-such-c++"))
+    assert main(["build"]) == 0
+    assert "no C++ compiler" in capsys.readouterr().out
+
+
+@pytest.mark.skipif(recurrence_cpp.missing_toolchain() is not None, reason="no C++ toolchain")
+def test_predvla_build_builds_once_ahead(capsys):
+    from lerobot_predvla.cli.main import main
+
+    assert main(["build"]) == 0
+    assert f"ready in {recurrence_cpp.build_directory()}" in capsys.readouterr().out

@@ -21,6 +21,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.cli.report",
     "lerobot_predvla.cli.push",
     "lerobot_predvla.cli.bench",
+    "lerobot_predvla.cli.build",
 ]
 
 

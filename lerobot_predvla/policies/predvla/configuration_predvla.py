@@ -13,7 +13,7 @@ SHORT_HORIZON_TAU = (16.0, 8.0, 5.0, 2.0)
 LONG_HORIZON_TAU = (30.0, 14.0, 8.0, 2.0)
 LONG_HORIZON_SEQUENCE_LENGTH = 500
 CORRUPTION_CHANNELS = ("vision", "proprio")
-RECURRENCE_BACKENDS = ("python", "cpp")
+RECURRENCE_BACKENDS = ("auto", "python", "cpp")
 COMPLEXITY_REDUCTIONS = ("sum", "mean")  # training C of Eq. 10: summed over the sequence, or its mean
 PREDVLA_PAPER_PARAMETERS = 675_732  # Table 1, at the paper's LIBERO layout (2 cameras, proprio 9, action 7)
 
@@ -101,13 +101,14 @@ class PredVLAConfig(CachedFeaturesConfig):
         use_efference_copy: Keep the efference copy A -> V of the model's own previous action and
             proprioception predictions (Eq. 6); False is ablation A3.
         recurrence_backend: Implementation of the fused recurrence's per-step loops (forward and hand-written
-            BPTT; same results, `tests/test_recurrence_cpp.py`). "python" (default): ATen ops called from Python,
-            on any device and dtype, nothing to build. "cpp": the loops compiled in C++ (`recurrence_cpp.py`),
-            CPU only, float32/float64; built with `torch.utils.cpp_extension.load_inline` on first use (g++ and
-            ninja needed, 24-28 s once on 2 shared cores, then loaded from `recurrence_cpp.build_directory()`), with an
-            error naming this flag if that fails. Error regression on CPU is dispatch-bound at batch 1 and runs
-            ~1.6x faster with "cpp" (1.3x its matmul floor instead of 2.1x; docs/speed.md). "python" stays the
-            default so that nothing needs a compiler; pass `--policy.recurrence_backend=cpp` for CPU evaluation.
+            BPTT; same results, `tests/test_recurrence_cpp.py`). "auto" (default): the loops compiled in C++
+            (`recurrence_cpp.py`) on CPU float32/float64 tensors where a C++ compiler and ninja are present, else the
+            Python loops, with one log line saying why. They are compiled once per Python and torch version by
+            `predvla build` (`make install` runs it), else by the first rollout (~30 s on 2 cores, logged), and loaded
+            in ~0.1 s afterwards. "cpp": the compiled loops or an error naming this flag. "python": ATen ops called
+            from Python, on any device and dtype, nothing to build (what configs saved before "auto" existed hold;
+            pass `--policy.recurrence_backend=auto` to such a checkpoint for the compiled loops). Error regression on
+            CPU is dispatch-bound at batch 1 and runs ~1.6x faster compiled (docs/speed.md).
         er_corruption_channel: Observation channel corrupted before error regression (Section 4.4,
             "Sensitivity to corrupted observations"): "vision" or "proprio"; None (default) corrupts nothing.
             The other channel is left untouched.
@@ -132,7 +133,7 @@ class PredVLAConfig(CachedFeaturesConfig):
     tau: tuple[float, float, float, float] = SHORT_HORIZON_TAU
     use_bottleneck: bool = True
     use_efference_copy: bool = True
-    recurrence_backend: str = "python"
+    recurrence_backend: str = "auto"
     use_amp: bool | None = None  # None: bfloat16 autocast in training on the CPU only (see the docstring)
 
     # Training (Table 2).
@@ -149,8 +150,8 @@ class PredVLAConfig(CachedFeaturesConfig):
     # Online error regression (Table 2).
     er_window: int = 40
     er_iterations: int = 10
-    er_lr: float = 0.05
     er_deadline_ms: float | None = None
+    er_lr: float = 0.05
     er_complexity_weight: float = 1.0
     er_lambda_v: float = 1.0
     er_lambda_q: float = 1.0
@@ -190,9 +191,9 @@ class PredVLAConfig(CachedFeaturesConfig):
             raise ValueError(
                 f"`er_window` must be >= 1 and `er_iterations` >= 0, got {self.er_window}, {self.er_iterations}."
             )
-        if self.er_corruption_channel not in (None, *CORRUPTION_CHANNELS):
         if self.er_deadline_ms is not None and self.er_deadline_ms <= 0:
             raise ValueError(f"`er_deadline_ms` must be > 0 milliseconds (or None), got {self.er_deadline_ms}.")
+        if self.er_corruption_channel not in (None, *CORRUPTION_CHANNELS):
             raise ValueError(
                 f"`er_corruption_channel` must be one of {CORRUPTION_CHANNELS} or None, "
                 f"got {self.er_corruption_channel!r}."

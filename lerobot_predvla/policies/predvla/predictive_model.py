@@ -250,7 +250,7 @@ class PredictiveModel(nn.Module):
         With `c_q=None` every posterior equals its prior, computed on the fly in module order (open loop);
         the length then comes from `extra_ab` or `steps`. `extra_ab` (time, batch, d_A_bottom) is added to
         A_bottom's pre-activation at each step. Same equations as a loop over `step`, fused (`recurrence`; its
-        loops in C++ with `config.recurrence_backend="cpp"`, `recurrence_cpp`).
+        loops compiled in C++ where `config.recurrence_backend` selects them, `recurrence_cpp.loops`).
         """
         length = next(x.shape[0] for x in (c_q, extra_ab) if x is not None) if steps is None else steps
         batch = state.h[T].shape[0]
@@ -267,7 +267,7 @@ class PredictiveModel(nn.Module):
         meta = Meta(self.alpha, cfg.use_efference_copy, cfg.num_mixtures, cfg.action_dim, cfg.proprio_dim)
         weights = self.fused_weights(c_q is None)
         inputs = (p, state.h, state.d, state.a_hat, state.q_hat)
-        run = recurrence_cpp.recurrence if cfg.recurrence_backend == "cpp" else recurrence
+        run = recurrence_cpp.loops(cfg.recurrence_backend, p[T])
         low = autocast_dtype(p[T].device.type)
         if low is not None:  # mixed precision (`--policy.use_amp`): the loops in `low`, the losses in float32
             inputs, weights = cast_floats((inputs, weights), low)

@@ -1,24 +1,31 @@
-"""The fused recurrence's per-step loops compiled in C++ (`PredVLAConfig.recurrence_backend="cpp"`).
+"""The fused recurrence's per-step loops compiled in C++ (`PredVLAConfig.recurrence_backend`, "auto" or "cpp").
 
 Same equations, buffers, matmuls and gradients as `recurrence._forward` and `_Recurrence.backward` (Eqs. 3-6 and
 their hand-written BPTT): the matmuls are the same ATen calls on the same operands (so the benchmark's floor, which
 replays recorded matmuls, is the same), while everything between them (tanh, the leaky integration, the
 concatenations, ReLU, the GMM mode, the BPTT's elementwise products) runs as one plain C++ loop per module and step
-instead of ~21 dispatched ATen ops. At batch 1 error regression is dominated by those dispatches (docs/speed.md).
-The weight gradients after the loop are the Python path's (`recurrence.weight_gradients`).
+instead of ~21 dispatched ATen ops, below autograd's dispatch keys (the autograd node is `_CppRecurrence`). At batch 1
+error regression is dominated by those dispatches (docs/speed.md). The weight gradients after the loop are the Python
+path's (`recurrence.weight_gradients`).
 
-The extension is compiled with `torch.utils.cpp_extension.load_inline` on first use (g++ and ninja needed; 24-28 s on
-2 shared cores, then loaded from `build_directory()`) and logged once. Builds are serialised by an OS file lock that
-dies with its holder, so an interrupted build never blocks the next one (`exclusive_build`). It runs on CPU tensors
-in float32 or float64. tanh uses glibc's vector kernels (libmvec, AVX2, <= 4 ulp) where the CPU and C library have
-them, else std::tanh; the log line names which.
+The extension is compiled with `torch.utils.cpp_extension.load_inline` (g++ and ninja needed; ~30 s on 2 cores), once
+per Python and torch version (`build_directory()`): ahead of any rollout by `predvla build` (which `make install`
+runs), else by the first rollout, with a log line. Later processes load it in ~0.1 s. Builds are serialised by an OS
+file lock that dies with its holder, so an interrupted build never blocks the next one (`exclusive_build`). It runs on
+CPU tensors in float32 or float64. tanh uses glibc's vector kernels (libmvec, AVX2, <= 4 ulp) where the CPU and C
+library have them, else std::tanh; the log line names which.
+
+`loops(backend, tensor)` picks the implementation: "cpp" always the compiled loops (an error naming the flag if they
+cannot be built); "python" always the Python loops; "auto" (the default) the compiled loops on CPU float32/float64
+where they build here, else the Python loops, with one log line saying why (`auto_uses_cpp`).
 """
 
 import logging
 import os
+import shutil
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import cache
 from pathlib import Path
@@ -34,6 +41,7 @@ from lerobot_predvla.policies.predvla.recurrence import (
     unpack_inputs,
     weight_gradients,
 )
+from lerobot_predvla.policies.predvla.recurrence import recurrence as python_recurrence
 
 SOURCE = r"""
 #include <torch/extension.h>
@@ -375,6 +383,7 @@ std::vector<Tensor> forward(
     std::optional<Tensor> w_va_t, Tensor w1_t, Tensor b1, Tensor w2_t, Tensor b2) {
   check(a0, p); check(a0, h0); check(a0, d0); check(a0, wt);
   check(a0, {q0, w1_t, b1, w2_t, b2, w_va_t.value_or(Tensor())});
+  const at::AutoDispatchBelowADInplaceOrView below_autograd;  // autograd is the caller's (_CppRecurrence)
   std::vector<Tensor> result;
   AT_DISPATCH_FLOATING_TYPES(a0.scalar_type(), "predvla_recurrence_forward", [&] {
     result = forward_impl<scalar_t>(alpha, efference, k, na, nq, p, h0, d0, a0, q0, wt, w_va_t, w1_t, b1, w2_t, b2);
@@ -388,6 +397,7 @@ std::vector<Tensor> backward(
     std::optional<Tensor> w_va, Tensor w1, Tensor w2, std::vector<std::optional<Tensor>> g_d,
     std::optional<Tensor> g_q, std::optional<Tensor> g_a, std::optional<Tensor> g_y1,
     std::vector<std::optional<Tensor>> g_h) {
+  const at::AutoDispatchBelowADInplaceOrView below_autograd;
   std::vector<Tensor> result;
   AT_DISPATCH_FLOATING_TYPES(abuf.scalar_type(), "predvla_recurrence_backward", [&] {
     result = backward_impl<scalar_t>(alpha, efference, k, na, nq, dbuf, gbuf, y1, abuf, index, w, w_va, w1, w2,
@@ -399,6 +409,7 @@ std::vector<Tensor> backward(
 
 
 EXTENSION_NAME = "predvla_recurrence"
+DTYPES = (torch.float32, torch.float64)  # what the compiled loops run on (CPU tensors)
 
 
 def build_directory() -> Path:
@@ -429,21 +440,43 @@ def exclusive_build(directory: Path) -> Iterator[None]:
         yield
 
 
-@cache
-def extension() -> ModuleType:
-    """Builds (first call in a fresh extension directory) or loads the compiled loops; logged once."""
-    from torch.utils.cpp_extension import load_inline
-
-    # torch runs `ninja` from PATH; pip's ninja (the `test` extra) sits beside this interpreter, which an unactivated
-    # virtual environment leaves off PATH.
+def _ninja_on_path() -> None:
+    """torch runs `ninja` from PATH; pip's ninja (the `test` extra) sits beside this interpreter, which an unactivated
+    virtual environment leaves off PATH."""
     here = os.path.dirname(sys.executable)
     if here not in os.environ.get("PATH", "").split(os.pathsep):
         os.environ["PATH"] = os.pathsep.join(filter(None, (here, os.environ.get("PATH"))))
+
+
+def missing_toolchain() -> str | None:
+    """Why the extension cannot be built here (no C++ compiler, no ninja), or None."""
+    from torch.utils import cpp_extension  # imported on use: it imports setuptools and probes for CUDA
+
+    _ninja_on_path()
+    compiler = cpp_extension.get_cxx_compiler()  # $CXX, else c++
+    if shutil.which(compiler) is None:
+        return f"no C++ compiler ({compiler!r} not found; install g++ or set $CXX)"
+    if not cpp_extension.is_ninja_available():
+        return "ninja not found (`pip install ninja`)"
+    return None
+
+
+@cache
+def extension() -> ModuleType:
+    """Builds (first call in a fresh extension directory) or loads the compiled loops; logged once."""
+    from torch.utils import cpp_extension
+
+    _ninja_on_path()
     start = time.perf_counter()
     directory = build_directory()
+    if not any(directory.glob(f"{EXTENSION_NAME}*.so")):
+        logging.info(
+            "PredVLA: compiling the C++ recurrence into %s (once per Python and torch version, ~30 s on 2 cores; "
+            "`predvla build` does it ahead)", directory,
+        )
     try:
         with exclusive_build(directory):
-            module = load_inline(
+            module = cpp_extension.load_inline(
                 name=EXTENSION_NAME, cpp_sources=SOURCE, functions=["forward", "backward", "tanh_kernel"],
                 extra_cflags=["-O3"], build_directory=str(directory),
             )
@@ -455,10 +488,36 @@ def extension() -> ModuleType:
             f"{error}. Install them or use recurrence_backend='python' (same results)."
         ) from error
     logging.info(
-        "PredVLA: C++ recurrence (recurrence_backend='cpp') ready in %.1f s (%s), tanh: %s",
+        "PredVLA: C++ recurrence ready in %.1f s (%s), tanh: %s",
         time.perf_counter() - start, directory, module.tanh_kernel(),
     )
     return module
+
+
+@cache
+def auto_uses_cpp() -> bool:
+    """Whether recurrence_backend='auto' runs the compiled loops in this process: True once they are built or
+    loaded; else False, and one log line says why (no compiler, no ninja, or the build's error)."""
+    reason = missing_toolchain()
+    if reason is None:
+        try:
+            extension()
+            return True
+        except RuntimeError as error:
+            reason = f"the build failed: {error.__cause__}"
+    logging.warning(
+        "PredVLA: recurrence_backend='auto' runs the Python loops (same results; error regression ~1.6x slower on "
+        "CPU): %s", reason,
+    )
+    return False
+
+
+def loops(backend: str, like: Tensor) -> Callable[..., tuple]:
+    """The recurrence implementation `backend` selects for tensors like `like` (see the module docstring)."""
+    compiled = backend == "cpp" or (
+        backend == "auto" and like.device.type == "cpu" and like.dtype in DTYPES and auto_uses_cpp()
+    )
+    return recurrence if compiled else python_recurrence
 
 
 class _CppRecurrence(torch.autograd.Function):
@@ -498,7 +557,7 @@ def recurrence(
     meta: Meta, p: list[Tensor], h: tuple[Tensor, ...], d: tuple[Tensor, ...], a: Tensor, q: Tensor, w: FusedWeights
 ) -> tuple[list[Tensor], Tensor, Tensor, Tensor, tuple[Tensor, ...]]:
     """`recurrence.recurrence` with the compiled loops (CPU tensors, float32 or float64)."""
-    if a.device.type != "cpu" or a.dtype not in (torch.float32, torch.float64):
+    if a.device.type != "cpu" or a.dtype not in DTYPES:
         raise ValueError(
             f"PredVLAConfig.recurrence_backend='cpp' runs on CPU tensors in float32 or float64, got {a.device} "
             f"{a.dtype}; use recurrence_backend='python' on other devices and dtypes."
