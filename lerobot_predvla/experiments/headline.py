@@ -33,7 +33,7 @@ RESULTS_DOC = "docs/results.md"
 SUITE = "libero_object"
 PAPER_DEMOS_PER_TASK = 50  # LIBERO's human demonstrations
 PAPER_SEEDS = 14  # Table 3
-# The paper's libero_object column (Table 3 PredVLA, Table 5 A6 open loop, Table 4 B2 and B1): (mean, std, seeds).
+# The paper's libero_object column (Table 3 PredVLA, Table 6 A6 open loop, Table 4 B2 and B1): (mean, std, seeds).
 PAPER_OBJECT = {"error_regression": (89.24, 6.13, 14), "open_loop": (78.14, 4.53, 7),
                 "bc_rnn": (2.20, 2.27, None), "bc_transformer": (15.49, 12.15, None)}
 COLUMNS = (("error_regression", "PredVLA, error regression"), ("open_loop", "PredVLA, exact open loop"),
@@ -267,7 +267,7 @@ def row_label(row: Row, prefix: str) -> str:
 
 
 def summary_table(rows: list[Row], prefix: str) -> str:
-    body = [["paper (Tables 3-5): 50 human demonstrations per task, ImageNet ResNet18, 50 episodes per task, "
+    body = [["paper (Tables 3, 4 and 6): 50 human demonstrations per task, ImageNet ResNet18, 50 episodes per task, "
              "600-step cap", *[_paper_cell(key) for key, _ in COLUMNS]]]
     body += [[row_label(row, prefix), *[row.cells[key].text() for key, _ in COLUMNS]] for row in rows]
     return _table(["libero_object success (%), mean over training seeds", *[name for _, name in COLUMNS]], body)
