@@ -58,6 +58,11 @@ class FrozenFrontend:
             )
         return encoder
 
+    def fitted_precision(self) -> torch.autocast:
+        """No enclosing autocast reaches the encoders or the PCA bases (`lerobot-eval` wraps the preprocessor in one
+        when a policy has `use_amp`): features come at the artefact's own precision, as the converter cached them."""
+        return torch.autocast(torch.device(self.device).type, enabled=False)
+
     def encode_images(self, images: Mapping[str, torch.Tensor | np.ndarray]) -> torch.Tensor:
         """Visual features (N, num_cameras * vision_dim_per_camera) from per-camera image batches.
 
@@ -66,17 +71,20 @@ class FrozenFrontend:
                 images in LeRobot orientation.
         """
         features = []
-        for camera, basis in self.artefact.cameras.items():
-            if camera not in images:
-                raise KeyError(f"Missing camera '{camera}'; the front end needs {list(self.artefact.cameras)}.")
-            pixels = preprocess_images(images[camera], self.artefact.preprocessing)
-            features.append(basis.transform(self.vision(pixels)))
+        with self.fitted_precision():
+            for camera, basis in self.artefact.cameras.items():
+                if camera not in images:
+                    raise KeyError(f"Missing camera '{camera}'; the front end needs {list(self.artefact.cameras)}.")
+                pixels = preprocess_images(images[camera], self.artefact.preprocessing)
+                features.append(basis.transform(self.vision(pixels)))
         return torch.cat(features, dim=-1)
 
     def encode_instructions(self, texts: Sequence[str]) -> torch.Tensor:
         """Language features (N, language_dim) of instructions, bit-identical for identical strings."""
         unique = sorted(set(texts))
-        embeddings = torch.from_numpy(self.language(unique))
-        # Row by row: a matmul's rounding can depend on how many rows it has.
-        rows = {text: self.artefact.language.transform(e[None])[0] for text, e in zip(unique, embeddings, strict=True)}
+        with self.fitted_precision():
+            embeddings = torch.from_numpy(self.language(unique))
+            # Row by row: a matmul's rounding can depend on how many rows it has.
+            rows = {text: self.artefact.language.transform(e[None])[0]
+                    for text, e in zip(unique, embeddings, strict=True)}
         return torch.stack([rows[t] for t in texts]) if texts else torch.zeros(0, self.artefact.language_dim)
