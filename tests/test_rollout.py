@@ -253,3 +253,12 @@ def test_masked_frames_are_logged_while_the_episode_runs(caplog):
     with caplog.at_level(logging.WARNING):
         guard({"x": torch.tensor([[float("nan"), 0.0, 0.0]])})
     assert "x unavailable (masked) at 1 env-steps" in caplog.text  # no reset needed
+
+
+def test_a_saved_front_end_device_no_longer_pins_the_encoders():
+    """Checkpoints saved before the front end followed the policy's device recorded `device: "cpu"` in the step's
+    config: it still loads, is ignored, and is not written again."""
+    step = FrontendProcessorStep(artefact=None, device="cpu")
+    assert step.get_config() == {"artefact": None, "refresh_interval": 1}
+    with pytest.raises(ValueError, match="refresh_interval"):
+        FrontendProcessorStep(refresh_interval=0)
