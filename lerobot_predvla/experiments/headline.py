@@ -156,10 +156,10 @@ def _policy_fields(sweep: Sweep, config: str, seen: frozenset = frozenset()) -> 
     return {**trained, **{k: str(v) for k, v in spec.eval_overrides.items()}}, steps
 
 
-def _differs(value, default) -> bool:
+def differs(value, default) -> bool:
     if isinstance(value, list | tuple) or isinstance(default, list | tuple):
         return not (isinstance(value, list | tuple) and isinstance(default, list | tuple) and len(value) == len(default)
-                    and not any(_differs(v, d) for v, d in zip(value, default, strict=True)))
+                    and not any(differs(v, d) for v, d in zip(value, default, strict=True)))
     try:
         return float(value) != float(default)
     except (TypeError, ValueError):
@@ -178,7 +178,7 @@ def config_departures(values: dict) -> list[str]:
     label = "Table 2" if values["type"] == "predvla" else "default"
     return [f"{k} = {_fmt(v)} ({label}: {_fmt(defaults[k])})"
             for k, v in sorted(values.items())
-            if k in defaults and k not in NOT_RECIPE and _differs(v, defaults[k])]
+            if k in defaults and k not in NOT_RECIPE and differs(v, defaults[k])]
 
 
 def recipe_departures(sweep: Sweep, config: str) -> list[str]:

@@ -321,18 +321,29 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None, co
     return "\n".join(lines)
 
 
-def _records_section(records: list[dict]) -> str:
+def inference_settings(record: dict, config: dict) -> dict:
+    """The policy fields a recorded evaluation ran with that differ from the published `config.json`: the recorded
+    training's `--policy.*` values (the checkpoint it evaluated) under the evaluation's overrides."""
+    from lerobot_predvla.experiments.headline import NOT_RECIPE, differs
+
+    train = (record.get("commands") or {}).get("train") or []
+    fields = dict(w[len("--policy."):].split("=", 1) for w in train if w.startswith("--policy.") and "=" in w)
+    fields.update(record.get("eval_overrides") or {})
+    return {k: v for k, v in fields.items() if k in config and k not in NOT_RECIPE and differs(v, config[k])}
+
+
+def _records_section(records: list[dict], config: dict) -> str:
     """Every evaluation of the checkpoint, from its run records (per-task successes from its eval_info.json)."""
     lines = [
         "Every evaluation of this checkpoint with `lerobot-eval --env.type=predvla_libero`, from the run records of "
-        "`predvla sweep` (successes per task from each run's `eval_info.json`):",
+        "`predvla sweep` (successes per task from each run's `eval_info.json`; inference: the policy fields the run "
+        "used where they differ from `config.json`):",
         "",
         "| configuration | inference | starts | episodes per task | step cap | successes per task | total |",
         "|---|---|---|---|---|---|---|",
     ]
     for r in sorted(records, key=lambda r: (r["results"], r["config"])):
-        overrides = {k: v for k, v in (r.get("eval_overrides") or {}).items() if k != "recurrence_backend"}
-        inference = ", ".join(f"`{k}={v}`" for k, v in overrides.items()) or "as trained"
+        inference = ", ".join(f"`{k}={v}`" for k, v in inference_settings(r, config).items()) or "as in config.json"
         starts = ("official init states" if r.get("init_states", True) is not False
                   else f"randomised resets (seed {r.get('eval_seed')})")
         tasks = ", ".join(str(t["successes"]) for _, t in sorted(r["tasks"].items(), key=lambda kv: int(kv[0])))
@@ -342,9 +353,10 @@ def _records_section(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _results_section(report: Path | None, config_name: str | None, records: list[dict] | None = None) -> str:
+def _results_section(report: Path | None, config_name: str | None, records: list[dict] | None = None,
+                     config: dict | None = None) -> str:
     if records:
-        return _records_section(records)
+        return _records_section(records, config or {})
     if report is None:
         return "No evaluation results were attached when publishing (`predvla push --results REPORT_DIR`)."
     summary = load_summary(report)
@@ -485,7 +497,7 @@ def render_card(
         "eval_command": eval_command(repo_id, _suite_of(dataset_repo_id) or "libero_object"),
         "episodes_per_task": str(PAPER_EPISODES_PER_TASK),
         "episode_length": str(PAPER_EPISODE_LENGTH),
-        "results_section": _results_section(report, report_config, records),
+        "results_section": _results_section(report, report_config, records, config),
         "extra_limitations": "" if _suite_of(dataset_repo_id) else (
             f"- The training dataset `{dataset_repo_id}` is not a LIBERO suite: the evaluation command above is "
             "only the protocol's form."
