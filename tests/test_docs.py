@@ -210,3 +210,17 @@ def test_model_card_states_the_checkpoints_own_training_and_results():
     for record in records:  # every evaluation, with its own totals and protocol
         assert f"`{record['config']}` |" in card and f"{record['successes']}/{record['episodes']}" in card
     assert "No evaluation results" not in card
+
+
+def test_push_attaches_the_recorded_evaluations_of_a_shipped_checkpoint(tmp_path):
+    """`predvla push --results results` renders the same results as the committed card (one renderer)."""
+    card = tmp_path / "card.md"
+    checkpoint = REPO / "checkpoints/predvla_libero_object"
+    assert predvla_main(["push", str(checkpoint), "me/predvla_libero_object", "--results", str(REPO / "results"),
+                         "--dry-run", "--card-out", str(card)]) == 0
+
+    def section(text: str) -> str:
+        return text[text.index("## Results"):text.index("## Limitations")]
+
+    assert section(card.read_text()) == section((checkpoint / "README.md").read_text())
+    assert "--policy.path=me/predvla_libero_object " in card.read_text()

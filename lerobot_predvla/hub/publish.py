@@ -27,7 +27,7 @@ from string import Template
 from huggingface_hub import CommitOperationAdd, HfApi
 from lerobot.configs import PreTrainedConfig
 
-from lerobot_predvla.experiments.report import load_summary
+from lerobot_predvla.experiments.report import SUMMARY_FILE, load_summary
 from lerobot_predvla.frontend.artefact import METADATA_FILE, TENSORS_FILE
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
 from lerobot_predvla.policies import POLICY_TYPES
@@ -561,15 +561,26 @@ def push_checkpoint(
     report_config: str | None = None,
     dry_run: bool = False,
 ) -> tuple[dict[str, Path | bytes], str | None]:
-    """Publish a saved checkpoint with its card in one commit. Returns the files and the commit URL."""
+    """Publish a saved checkpoint with its card in one commit. Returns the files and the commit URL.
+
+    `report`: a `predvla report` output (its aggregate for `report_config`), or a results folder such as this
+    repository's `results/`, whose sweep run records of this checkpoint fill the card's results (`evaluation_records`).
+    """
     files, dataset_root = collect_checkpoint(checkpoint, frontend)
+    records = None
+    if report is not None and Path(report).is_dir() and not (Path(report) / SUMMARY_FILE).is_file():
+        records = evaluation_records(pretrained_dir(checkpoint), report)
+        if not records:
+            raise HubError(f"{report}: neither a report ({SUMMARY_FILE}) nor a results folder with run records "
+                           f"(*/runs/records/) of {checkpoint}.")
+        report = None
     _policy_type(json.loads(files["config.json"].read_text()), files["config.json"])
     dataset = None
     if dataset_root is not None and "train_config.json" in files:
         repo = json.loads(files["train_config.json"].read_text())["dataset"]["repo_id"]
         dataset = DatasetSummary.from_root(repo, dataset_root)
     published = without_machine_paths(files)
-    published[CARD_FILE] = render_card(published, repo_id, dataset, report, report_config).encode()
+    published[CARD_FILE] = render_card(published, repo_id, dataset, report, report_config, records).encode()
     published[MANIFEST_FILE] = manifest_text(published).encode()  # SHA-256 of every file of the commit
     if dry_run:
         return published, None
