@@ -197,7 +197,7 @@ def test_a_second_training_on_a_held_output_folder_refuses_naming_the_holder(har
     time.sleep(0.1)
     assert json.loads((out / LOCK_FILE).read_text())["pid"] == holder.pid  # a stale record; the lock is gone
     probe = subprocess.run([sys.executable, "-c", "import sys; from lerobot_predvla.utils.run_lock import "
-                            "lock_output_dir; lock_output_dir(sys.argv[1])", str(out)], timeout=120)
+                            "lock_output_dir; lock_output_dir(sys.argv[1])", str(out)], timeout=500)
     assert probe.returncode == 0
 
 

@@ -67,6 +67,7 @@ class HarnessConfig:
     kills: int = 30
     forced_every: int = 3  # every n-th kill is forced at a named point of a checkpoint write (0: never)
     max_delay_s: float = 1.5  # random delay after the target step is logged
+    min_kill_step: int = 1  # random kills come after this step (save_freq + 1: every kill is followed by a resume)
     rng_seed: int = 0
     reference: bool = True
     timeout_s: float = 3600.0  # per attempt: a guard against a hung lerobot-train
@@ -267,7 +268,8 @@ def run_harness(cfg: HarnessConfig) -> dict:
             kill_at = f"{point}@{target}"
         attempt = Attempt(train_command(cfg, out, resume=resumed_from > 0), log, kill_at)
         if planned and not forced:
-            target = rng.randint(resumed_from + 1, min(cfg.steps, resumed_from + 2 * cfg.save_freq))
+            first = max(resumed_from + 1, cfg.min_kill_step)
+            target = rng.randint(first, min(cfg.steps, max(first, resumed_from + 2 * cfg.save_freq)))
             killed = attempt.kill_after_step(target, rng.uniform(0.0, cfg.max_delay_s), cfg.timeout_s)
             rc = attempt.proc.returncode if not killed else -signal.SIGKILL
         else:
@@ -344,7 +346,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[HarnessConfig, Path | Non
                         help="a LeRobot dataset PredVLA can train on (default: generate SYNTHETIC beside the run)")
     parser.add_argument("--output-dir", type=Path, required=True, help="the run's folder (replaced); logs beside it")
     for name in ("repo_id", "steps", "save_freq", "batch_size", "sequence_length", "seed", "kills", "forced_every",
-                 "max_delay_s", "rng_seed", "timeout_s"):
+                 "max_delay_s", "min_kill_step", "rng_seed", "timeout_s"):
         default = getattr(HarnessConfig, name)
         parser.add_argument(f"--{name.replace('_', '-')}", type=type(default), default=default)
     parser.add_argument("--no-reference", dest="reference", action="store_false",
