@@ -10,13 +10,16 @@ own orientation (no rotation is applied).
 """
 
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.datasets.video_utils import decode_video_frames
 from lerobot.utils.constants import ACTION, OBS_STATE
+from lerobot.utils.import_utils import get_safe_default_video_backend
 
 from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
@@ -180,20 +183,53 @@ class LeRobotSource:
         return [str(text) for ep in self.meta.episodes for text in ep["tasks"]]
 
     def frame_batches(self, batch_size: int, frame_stride: int = 1) -> Iterator[FrameBatch]:
-        """Every `frame_stride`-th frame of every episode, in episode order, as LeRobotDataset serves them."""
-        for ep in self.meta.episodes:
-            e = int(ep["episode_index"])
-            indices = range(int(ep["dataset_from_index"]), int(ep["dataset_to_index"]), frame_stride)
-            for start in range(0, len(indices), batch_size):
-                chunk = indices[start : start + batch_size]
-                key = None
-                try:
-                    items = [self.dataset[i] for i in chunk]
-                    images = {}
-                    for key in self.cameras:
-                        images[key] = torch.stack([item[key] for item in items])
-                except Exception as err:  # Decoding failures come in many types (av, torchcodec, PIL, ...).
-                    raise LeRobotSourceError(self.name, f"cannot read frames ({type(err).__name__}: {err})", e,
-                                             key) from err
-                yield FrameBatch(e, np.array([int(item["index"]) for item in items]), images,
-                                 [item["task"] for item in items])
+        """Every `frame_stride`-th frame of every episode, in episode order, as LeRobotDataset serves them.
+
+        Batches are read in a background thread while the caller works on the previous one. Video cameras are
+        decoded a batch at a time: one `decode_video_frames` call per camera and batch, with the timestamps,
+        backend and tolerance `LeRobotDataset.__getitem__` uses for each frame, so the frames are its frames
+        (one pass over the video instead of a seek from the key frame per frame)."""
+        columns = self.dataset.hf_dataset.select_columns(["index", "timestamp", "task_index"]).with_format("numpy")[:]
+        tasks = self.task_strings()
+        chunks = [
+            (int(ep["episode_index"]), indices[start : start + batch_size])
+            for ep in self.meta.episodes
+            for indices in [range(int(ep["dataset_from_index"]), int(ep["dataset_to_index"]), frame_stride)]
+            for start in range(0, len(indices), batch_size)
+        ]
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="predvla-frames") as reader:
+            pending = None
+            for episode, chunk in chunks:
+                following = reader.submit(self._read_frames, episode, chunk, columns, tasks)
+                if pending is not None:
+                    yield pending.result()
+                pending = following
+            if pending is not None:
+                yield pending.result()
+
+    def _read_frames(
+        self, episode: int, chunk: range, columns: dict[str, np.ndarray], tasks: dict[int, str]
+    ) -> FrameBatch:
+        rows = np.asarray(chunk)
+        key = None
+        try:
+            images = {}
+            for key in self.cameras:
+                images[key] = self._decode(key, episode, rows, columns)
+        except Exception as err:  # Decoding failures come in many types (av, torchcodec, PIL, ...).
+            raise LeRobotSourceError(self.name, f"cannot read frames ({type(err).__name__}: {err})", episode,
+                                     key) from err
+        return FrameBatch(episode, columns["index"][rows].astype(np.int64),
+                          images, [tasks[int(t)] for t in columns["task_index"][rows]])
+
+    def _decode(self, key: str, episode: int, rows: np.ndarray, columns: dict[str, np.ndarray]) -> torch.Tensor:
+        """Float (N, 3, H, W) images of camera `key` at data rows `rows` of one episode."""
+        if key not in self.meta.video_keys:  # images stored per frame (PNG): LeRobot's own per-item path
+            return torch.stack([self.dataset[int(i)][key] for i in rows])
+        start = self.meta.episodes[episode][f"videos/{key}/from_timestamp"]
+        return decode_video_frames(
+            self.dataset.root / self.meta.get_video_file_path(episode, key),
+            [start + float(t) for t in columns["timestamp"][rows]],
+            self.dataset.tolerance_s,
+            get_safe_default_video_backend(),
+        )
