@@ -2,12 +2,13 @@
 
 Training step (Eq. 10, forward + backward + gradient clip + both Adam optimizers) and one error-regression
 control step (Section 3.5: window W, n_itr iterations, full window). The floor replays, on random tensors of
-the same shapes and strides, exactly the matmuls the fast path issued, and nothing else. Error regression is
-timed with the fast path's Python loops (`er_ms_fast_*`, the default backend) and with its compiled loops
-(`er_ms_cpp_*`, `recurrence_backend="cpp"`, built on first use), in alternation with their common floor (the
-two issue the same matmuls; checked). The training step is
-also timed as `lerobot-train` takes it (`bench_lerobot_train.py`), in alternation with the fast step at the same
-batch and sequence length.
+the same shapes and strides, exactly the matmuls the fast path issued, and nothing else. "fast" is the default
+configuration (`recurrence_backend="auto"`: the compiled loops where they build, `er_backend` says which ran). Error
+regression is timed on that default path (`er_ms_fast_*`) and with the Python loops (`er_ms_python_*`,
+`recurrence_backend="python"`), in alternation with their common floor (the two issue the same matmuls; checked).
+The training step is also timed as `lerobot-train` takes it (`bench_lerobot_train.py`), in alternation with the
+fast step at the same batch and sequence length. `control_step_ms_p50/_p99` time a whole control step at batch 1 on
+the default path: the front end's ResNet18 on refresh steps, error regression, the action.
 
     python -m benchmarks.bench_core --quick
 """
@@ -31,10 +32,13 @@ from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean, training_complexity
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
+from lerobot_predvla.policies.predvla.recurrence_cpp import loops, recurrence
 from lerobot_predvla.policies.predvla.reference import reference_rollout
 
 STORE_EPISODES = (100, 10_000)  # x 200 steps: 10,000 episodes is 2 GB of posteriors, 6 GB with Adam's moments
 STORE_BATCH = 8
+FRONTEND_DATASET = {True: (2, 50), False: (10, 200)}  # episodes x frames of the video dataset, --quick or not
+CONTROL_STEPS = {True: 80, False: 400}  # control steps timed end to end, --quick or not (20 / 100 refreshes)
 MATMULS = {torch.ops.aten.mm.default, torch.ops.aten.addmm.default, torch.ops.aten.bmm.default,
            torch.ops.aten.mm.out, torch.ops.aten.addmm.out}
 
@@ -218,18 +222,61 @@ def floor_fn(fn: Callable) -> tuple[Callable[[], None], int]:
     return replay, len(calls)
 
 
-def frontend_ms(repeats: int) -> float:
-    """ResNet18 features of one frame (two 128 px cameras) at batch 1, preprocessing included, random weights.
-
-    fp32 channels-last: without native bf16 instructions (this machine's CPU) bf16 is emulated and ~5x slower.
-    """
+def frontend_fn(frames: int) -> tuple[Callable[[int], Tensor], int]:
+    """The front end at batch 1 as a control step runs it: ResNet18 features of frame t (two 128 px cameras,
+    preprocessing included, random weights, fp32 channels-last: `predvla fit-frontend`'s default precision) and
+    the number of frames available."""
     from benchmarks.bench_frontend import encode, synthetic_frames
     from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
     from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
 
     encoder = VisionEncoder(VisionWeights.parse("random"), "fp32", channels_last=True, batch_size=1, verbose=False)
-    cameras = [synthetic_frames(1, seed) for seed in (0, 1)]
-    return median_ms(partial(encode, encoder, cameras, PreprocessingSpec(), False), repeats, warmup=2)[0]
+    cameras = [synthetic_frames(frames, seed) for seed in (0, 1)]
+    spec = PreprocessingSpec()
+    return lambda t: torch.cat(encode(encoder, [c[t : t + 1] for c in cameras], spec, False), dim=-1), frames
+
+
+def control_step_latencies_ms(model: PredictiveModel, steps: int) -> list[float]:
+    """Wall time of `steps` whole control steps at batch 1 on the model's default path, error-regression window
+    full: on every `visual_refresh_interval`-th step the front end encodes the new frame (its 1,024 ResNet18
+    features projected to the policy's `vision_dim`, PCA's cost), between refreshes the last features are reused
+    (what `FrontendProcessorStep` does); then error regression and the action."""
+    cfg = model.config
+    encode_frame, frames = frontend_fn(16)
+    projection = torch.randn(encode_frame(0).shape[-1], cfg.vision_dim) / 32
+    language, obs = control_stream(cfg, 1, cfg.er_window + steps)
+    er = ErrorRegression(model)
+    for vision, proprio in obs[: cfg.er_window]:
+        er.observe(language, vision, proprio)
+    er.infer()  # warm-up
+    times, vision = [], None
+    for t, (_, proprio) in enumerate(obs[cfg.er_window :]):
+        start = time.perf_counter()
+        if er.step_index % cfg.visual_refresh_interval == 0:
+            vision = encode_frame(t % frames) @ projection
+        er(language, vision, proprio)
+        times.append((time.perf_counter() - start) * 1e3)
+    return times
+
+
+def frontend_dataset_rates(episodes: int, length: int) -> dict:
+    """`predvla convert --dataset-root` end to end on a generated video dataset (two 128 px cameras), frames per
+    second, with a front end fitted in fp32 (`predvla fit-frontend`'s default) and in bf16 (`--precision bf16`)."""
+    from benchmarks.bench_frontend_dataset import frontend_throughput, make_video_dataset
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = make_video_dataset(Path(tmp) / "video_dataset", episodes, length)
+        rates = {precision: frontend_throughput(Path(tmp), root, precision) for precision in ("fp32", "bf16")}
+    return {"frontend_frames": rates["fp32"]["frames"],
+            "frontend_frames_per_s": rates["fp32"]["convert_frames_per_s"],
+            "frontend_frames_per_s_bf16": rates["bf16"]["convert_frames_per_s"],
+            "frontend_fit_frames_per_s": rates["fp32"]["fit_frames_per_s"],
+            "frontend_fit_frames_per_s_bf16": rates["bf16"]["fit_frames_per_s"]}
+
+
+def percentile(values: list[float], q: float) -> float:
+    """The q-th percentile (linear interpolation between order statistics)."""
+    return statistics.quantiles(values, n=100, method="inclusive")[round(q) - 1]
 
 
 def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps: int = 200) -> dict:
@@ -257,27 +304,32 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
     for key, (median, times) in interleaved_median_ms(amp, reps_fast, warmup=2).items():
         results[key], spread[key] = median, times
     record("er_ms_ref_b1", control_step_fn(model, ref, 1), reps_ref)
-    # Error regression with the Python loops (the default) and the compiled ones (`recurrence_backend="cpp"`, same
-    # weights), timed in alternation with their floor: both issue the same matmuls on the same operands (checked).
-    cpp_model = randomised_model(dataclasses.replace(config, recurrence_backend="cpp"))
+    # Error regression on the default path ("auto") and with the Python loops (same weights), timed in alternation
+    # with their floor: both issue the same matmuls on the same operands (checked).
+    python_model = randomised_model(dataclasses.replace(config, recurrence_backend="python"))
     for b in (1, 10):
-        fast_control, cpp_control = control_step_fn(model, fast, b), control_step_fn(cpp_model, cpp_model.rollout, b)
+        fast_control = control_step_fn(model, fast, b)
+        python_control = control_step_fn(python_model, python_model.rollout, b)
         replay, results[f"er_matmuls_b{b}"] = floor_fn(fast_control)
-        if recorded_matmuls(cpp_control) != recorded_matmuls(fast_control):
+        if recorded_matmuls(python_control) != recorded_matmuls(fast_control):
             raise RuntimeError("the compiled recurrence issues other matmuls than the Python one: no common floor")
-        timed = {f"er_ms_fast_b{b}": fast_control, f"er_ms_cpp_b{b}": cpp_control, f"er_ms_floor_b{b}": replay}
+        timed = {f"er_ms_fast_b{b}": fast_control, f"er_ms_python_b{b}": python_control, f"er_ms_floor_b{b}": replay}
         for key, (median, times) in interleaved_median_ms(timed, reps_fast, warmup=2).items():
             results[key], spread[key] = median, times
+    results["er_backend"] = "cpp" if loops(config.recurrence_backend, data["c_q"]) is recurrence else "python"
     store_data = training_data(config, STORE_BATCH, steps)
     for episodes in STORE_EPISODES:  # per-step cost of the posterior store, small and LIBERO-90-sized datasets
         store = PosteriorStore(episodes, steps, store_data["c_q"].shape[-1], lr=config.posterior_lr)
         record(f"store_step_ms_{episodes}ep", train_step_fn(model, model.rollout, store_data, store), reps_fast)
     for key, (median, times) in lerobot_train_comparison(model, data, max(reps_fast, 5)).items():
         results[key], spread[key] = median, times
-    results["frontend_ms_b1"] = frontend_ms(reps_fast)
-    # The front end runs on every 4th control step (fresh visual observation): amortised per control step.
-    amortised = results["frontend_ms_b1"] / config.visual_refresh_interval
-    results["control_ms_fast_b1"] = results["er_ms_fast_b1"] + amortised
+    encode_frame, _ = frontend_fn(1)
+    results["frontend_ms_b1"] = median_ms(partial(encode_frame, 0), reps_fast, warmup=2)[0]
+    latencies = control_step_latencies_ms(model, CONTROL_STEPS[quick])
+    for q in (50, 99):
+        results[f"control_step_ms_p{q}"] = percentile(latencies, q)
+    results["control_steps"] = len(latencies)
+    results.update(frontend_dataset_rates(*FRONTEND_DATASET[quick]))
 
     results.update(
         threads=threads, batch=batch, steps=steps, window=config.er_window, er_iterations=config.er_iterations,
@@ -287,8 +339,9 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
         er_speedup_b1=results["er_ms_ref_b1"] / results["er_ms_fast_b1"],
         er_fast_over_floor_b1=results["er_ms_fast_b1"] / results["er_ms_floor_b1"],
         er_fast_over_floor_b10=results["er_ms_fast_b10"] / results["er_ms_floor_b10"],
-        er_cpp_over_floor_b1=results["er_ms_cpp_b1"] / results["er_ms_floor_b1"],
-        er_cpp_over_floor_b10=results["er_ms_cpp_b10"] / results["er_ms_floor_b10"],
+        er_python_over_floor_b1=results["er_ms_python_b1"] / results["er_ms_floor_b1"],
+        er_python_over_floor_b10=results["er_ms_python_b10"] / results["er_ms_floor_b10"],
+        control_rate_hz_p50=1e3 / results["control_step_ms_p50"],
         store_10000_over_100=results["store_step_ms_10000ep"] / results["store_step_ms_100ep"],
         lerobot_train_over_fast=results["lerobot_train_step_ms"] / results["train_step_ms_fast_same_shape"],
     )
@@ -305,15 +358,20 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
         cells = [f"{x:10.1f}" if x is not None else f"{'-':>10s}" for x in (r, f, fl)]
         ratio = f"{r / f:9.2f}" if r is not None else f"{'-':>9s}"
         print(f"  {label:44s} {' '.join(cells)} {ratio} {f / fl:10.2f}")
-    print(f"  error regression with the compiled loops (recurrence_backend='cpp'), b1 / b10: "
-          f"{results['er_ms_cpp_b1']:.1f} / {results['er_ms_cpp_b10']:.1f} ms, over the floor "
-          f"{results['er_cpp_over_floor_b1']:.2f} / {results['er_cpp_over_floor_b10']:.2f}")
+    print(f"  the fast rows ran the {results['er_backend']} loops (recurrence_backend='auto'); error regression with "
+          f"the Python loops, b1 / b10: {results['er_ms_python_b1']:.1f} / {results['er_ms_python_b10']:.1f} ms, "
+          f"over the floor {results['er_python_over_floor_b1']:.2f} / {results['er_python_over_floor_b10']:.2f}")
     print(f"  training step B={batch} T={steps} under bf16 autocast / fp32, in alternation: "
           f"{results['train_step_ms_bf16']:.1f} / {results['train_step_ms_fp32']:.1f} ms "
           f"(ratio {results['train_bf16_over_fp32']:.2f})")
-    print(f"  front end b1 (2 cameras, 128 px, fp32): {results['frontend_ms_b1']:.1f} ms; "
-          f"control step b1 with it amortised over {config.visual_refresh_interval} steps: "
-          f"{results['control_ms_fast_b1']:.1f} ms")
+    print(f"  control step b1 end to end over {results['control_steps']} steps (front end "
+          f"{results['frontend_ms_b1']:.1f} ms on every {config.visual_refresh_interval}th, error regression, action): "
+          f"p50 {results['control_step_ms_p50']:.1f} ms ({results['control_rate_hz_p50']:.1f} Hz), p99 "
+          f"{results['control_step_ms_p99']:.1f} ms; paper: 46 ms on an RTX 5090")
+    print(f"  predvla convert --dataset-root, {results['frontend_frames']} video frames x 2 cameras, end to end: "
+          f"{results['frontend_frames_per_s']:.1f} frames/s (fp32 front end), "
+          f"{results['frontend_frames_per_s_bf16']:.1f} (bf16); fit-frontend {results['frontend_fit_frames_per_s']:.1f}"
+          f" / {results['frontend_fit_frames_per_s_bf16']:.1f}")
     print(f"  training step B={STORE_BATCH} T={steps} with a posterior store of 100 / 10,000 episodes: "
           f"{results['store_step_ms_100ep']:.1f} / {results['store_step_ms_10000ep']:.1f} ms "
           f"(ratio {results['store_10000_over_100']:.2f})")
