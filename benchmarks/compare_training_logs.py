@@ -4,8 +4,8 @@ Written to judge bfloat16 mixed precision (`--policy.use_amp=true`) against floa
 averages its terms over the `--log_freq` steps since the previous line, so line i is step (i + 1) * log_freq of a run
 that was not resumed. The runs "agree within noise" when, for every logged term, the mean absolute difference between
 the two curves over the last `--window` lines is at most the reference curve's own noise there: the standard
-deviation of its residuals around a straight line fitted to those lines (how much consecutive 100-step averages of
-the same run scatter).
+deviation of the differences between its consecutive lines over sqrt(2) (how much one 100-step average of the same run
+scatters; differencing removes the trend of a curve that is still falling).
 
     python -m benchmarks.compare_training_logs REFERENCE.log CANDIDATE.log --labels fp32 bf16 --out DIR
 """
@@ -38,9 +38,7 @@ def parse_log(path: Path) -> dict[str, np.ndarray]:
 
 def agreement(reference: np.ndarray, candidate: np.ndarray, window: int) -> dict[str, float]:
     ref, cand = reference[-window:], candidate[-window:]
-    x = np.arange(len(ref))
-    residuals = ref - np.polyval(np.polyfit(x, ref, 1), x)
-    noise = float(residuals.std(ddof=2)) if len(ref) > 2 else float("nan")
+    noise = float(np.diff(ref).std(ddof=1) / np.sqrt(2)) if len(ref) > 2 else float("nan")
     difference = float(np.abs(cand - ref).mean())
     return {"mean_abs_difference": difference, "reference_noise": noise,
             "relative_difference": difference / float(np.abs(ref).mean()), "agree": difference <= noise}
@@ -60,8 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     steps = (np.arange(n) + 1) * args.log_freq
     terms = [k for k in TERMS if k in runs[0] and k in runs[1]]
     report = {"steps": int(steps[-1]), "labels": args.labels, "window_lines": args.window,
-              "update_s_median": {label: float(np.median(r["updt_s"][:n])) for label, r in zip(args.labels, runs)
-                                  if "updt_s" in r},
+              "update_s_median": {label: float(np.median(r["updt_s"][:n]))
+                                  for label, r in zip(args.labels, runs, strict=True) if "updt_s" in r},
               "terms": {k: agreement(runs[0][k][:n], runs[1][k][:n], args.window) for k in terms if k != "updt_s"}}
     args.out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(args.out / "curves.json", report)
