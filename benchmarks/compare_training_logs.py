@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     for ax, key in zip(np.atleast_1d(axes), shown, strict=True):
         for label, run in zip(args.labels, runs, strict=True):
             ax.plot(steps, run[key][:n], lw=1, label=label)
-        ax.set(title=key, xlabel="training step", yscale="log" if key in ("loss", "complexity") else "linear")
+        ax.set(title=key, xlabel="training step", yscale="log" if key == "complexity" else "linear")
         ax.title.set_fontsize(9)
         ax.legend(fontsize=7)
     fig.tight_layout()

@@ -241,8 +241,8 @@ def test_language_pca_on_the_libero_task_list_separates_one_task(libero_root, tm
 
 
 def test_an_enclosing_autocast_does_not_change_the_features(frontend):
-    """lerobot-eval runs the preprocessor under autocast when the policy has `use_amp` (PredVLA trains in bf16 on
-    the CPU): the features must stay those the converter cached."""
+    """lerobot-eval runs the preprocessor under autocast when the policy has `use_amp` (PredVLA trained with
+    `--policy.use_amp=true`): the features must stay those the converter cached."""
     images = {camera: libero_hdf5_to_lerobot(raw_images(2, seed=i)) for i, camera in enumerate(CAMERAS)}
     expected = frontend.encode_images(images), frontend.encode_instructions(INSTRUCTIONS[:2])
     with torch.autocast("cpu", dtype=torch.bfloat16):
