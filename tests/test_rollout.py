@@ -139,6 +139,30 @@ def test_lerobot_rollout_stops_on_a_misnamed_camera(so101):
             "observation has ['observation.images.top', 'observation.images.wrist']") in log, log[-3000:]
 
 
+@pytest.mark.slow  # trains with lerobot-train (the fixture)
+def test_replay_robot_serves_the_episode_and_rejects_other_motors(so101, tmp_path):
+    from lerobot_predvla.robots import DatasetReplayRobot, DatasetReplayRobotConfig
+
+    root = so101["root"] / "source"
+    robot = DatasetReplayRobot(DatasetReplayRobotConfig(dataset_root=str(root), episode=1, calibration_dir=tmp_path))
+    assert list(robot.action_features) == list(SO101.action_names)
+    robot.connect()
+    episode = LeRobotDataset("local/so101", root=root)
+    start = int(episode.meta.episodes[1]["dataset_from_index"])
+    for t in range(2):
+        observation, recorded = robot.get_observation(), episode[start + t]
+        assert [observation[name] for name in SO101.state_names] == recorded[OBS_STATE].tolist()
+        np.testing.assert_array_equal(observation["front"], as_camera_frame(recorded["observation.images.front"]))
+    action = dict.fromkeys(SO101.action_names, 0.5)
+    assert robot.send_action(action) == action and robot.actions == [action]
+    swapped = {("elbow.pos" if k == "elbow_flex.pos" else k): v for k, v in action.items()}
+    with pytest.raises(ValueError, match=r"missing \['elbow_flex.pos'\], unknown \['elbow.pos'\]"):
+        robot.send_action(swapped)
+    robot.disconnect()
+    with pytest.raises(ValueError, match="--robot.episode=7"):
+        DatasetReplayRobotConfig(dataset_root=str(root), episode=7)
+
+
 def raw_frame(step: int = 0) -> dict:
     rng = np.random.default_rng(step)
     frame = {key: rng.integers(0, 256, (*shape, 3), dtype=np.uint8) for key, shape in SO101.cameras.items()}
