@@ -9,16 +9,20 @@ default video codec), then fitted and converted with random ResNet18 weights (th
 """
 
 import argparse
+import itertools
 import json
+import statistics
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_predvla.data.dataset_conversion import convert_dataset
 from lerobot_predvla.frontend.dataset_fitting import FitDatasetFrontendConfig, fit_frontend_on_dataset
+from lerobot_predvla.frontend.lerobot_source import LeRobotSource
 from lerobot_predvla.frontend.vision import PRECISIONS, VisionWeights
 
 CAMERAS = ("observation.images.image", "observation.images.image2")  # LIBERO's community layout
@@ -68,6 +72,30 @@ def frontend_throughput(workdir: Path, dataset_root: Path, precision: str, batch
             "convert_s": summary.seconds, "convert_frames_per_s": frames / summary.seconds}
 
 
+def decoding_rates(dataset_root: Path, frames: int = 100, batch_size: int = 50, repeats: int = 3) -> dict:
+    """Frames/s of the first `frames` frames (every camera) read one by one through `LeRobotDataset.__getitem__`
+    and a batch at a time through `LeRobotSource.frame_batches`, in alternation; and whether they are identical."""
+    source = LeRobotSource.open(dataset_root)
+
+    def one_by_one() -> dict[str, torch.Tensor]:
+        items = [source.dataset[i] for i in range(frames)]
+        return {key: torch.stack([item[key] for item in items]) for key in source.cameras}
+
+    def batched() -> dict[str, torch.Tensor]:
+        batches = list(itertools.islice(source.frame_batches(batch_size), -(-frames // batch_size)))
+        return {key: torch.cat([b.images[key] for b in batches])[:frames] for key in source.cameras}
+
+    reference, candidate = one_by_one(), batched()
+    rates: dict[str, list[float]] = {"one_by_one": [], "batched": []}
+    for _ in range(repeats):
+        for name, read in (("one_by_one", one_by_one), ("batched", batched)):
+            start = time.perf_counter()
+            read()
+            rates[name].append(frames / (time.perf_counter() - start))
+    return {"identical": all(torch.equal(reference[k], candidate[k]) for k in reference),
+            **{f"decode_frames_per_s_{name}": statistics.median(values) for name, values in rates.items()}}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=100)
@@ -84,6 +112,8 @@ def main(argv: list[str] | None = None) -> int:
             make_video_dataset(dataset_root, args.episodes, args.length, args.size)
             print(f"made {args.episodes * args.length} frames x {len(CAMERAS)} cameras in "
                   f"{time.perf_counter() - start:.0f} s")
+        print(json.dumps({k: round(v, 1) if isinstance(v, float) else v
+                          for k, v in decoding_rates(dataset_root).items()}))
         for precision in args.precision:
             print(json.dumps({k: round(v, 2) if isinstance(v, float) else v
                               for k, v in frontend_throughput(workdir, dataset_root, precision).items()}))
