@@ -112,7 +112,8 @@ def test_lerobot_train_push_uses_predvla_card_and_never_posteriors(trained_and_p
     assert (checkpoint / POSTERIOR_STORE_FILE).is_file()  # the training checkpoint has them ...
     ours = commits[0]
     assert ours["repo_id"] == REPO
-    assert ours["paths"] == ["README.md", "config.json", "model.safetensors", "train_config.json"]  # ... the Hub not
+    assert ours["paths"] == ["README.md", "config.json", "model.safetensors", "sha256_manifest.json",
+                             "train_config.json"]  # ... the Hub not; the manifest verifies what it got
     processor_files = {p for c in commits[1:] for p in c["paths"]}
     assert {"policy_preprocessor.json", "policy_postprocessor.json"} <= processor_files
     assert not any("posterior" in p or "optimizer" in p for c in commits for p in c["paths"])

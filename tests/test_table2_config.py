@@ -1,4 +1,4 @@
-"""The Table 2 experiment's files: `configs/policy/predvla_table2.json` brings every Table 2 value to the policy and
+"""The Table 2 experiment's files: `configs/policy/predvla.json` brings every Table 2 value to the policy and
 the optimizer through the real `lerobot-train`, and `configs/sweeps/libero_object_table2.yaml` plans the paper's
 protocol (`predvla sweep --dry-run`)."""
 
