@@ -11,6 +11,7 @@ default video codec), then fitted and converted with random ResNet18 weights (th
 import argparse
 import itertools
 import json
+import shutil
 import statistics
 import tempfile
 import time
@@ -57,7 +58,10 @@ def make_video_dataset(root: Path, episodes: int, length: int, size: int = 128, 
 
 
 def frontend_throughput(workdir: Path, dataset_root: Path, precision: str, batch_size: int = 64) -> dict:
-    """Fit a front end on the dataset and convert it; seconds and frames per second of each."""
+    """Fit a front end on the dataset and convert it; seconds and frames per second of each (a previous run's
+    outputs in `workdir` are replaced)."""
+    for previous in (workdir / f"frontend_{precision}", workdir / f"converted_{precision}"):
+        shutil.rmtree(previous, ignore_errors=True)
     frames = LeRobotDataset("local/frontend_bench", root=dataset_root).meta.total_frames
     start = time.perf_counter()
     artefact = fit_frontend_on_dataset(FitDatasetFrontendConfig(
