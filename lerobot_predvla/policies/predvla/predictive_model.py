@@ -267,11 +267,11 @@ class PredictiveModel(nn.Module):
         meta = Meta(self.alpha, cfg.use_efference_copy, cfg.num_mixtures, cfg.action_dim, cfg.proprio_dim)
         weights = self.fused_weights(c_q is None)
         inputs = (p, state.h, state.d, state.a_hat, state.q_hat)
-        run = recurrence_cpp.loops(cfg.recurrence_backend, p[T])
         low = autocast_dtype(p[T].device.type)
         if low is not None:  # mixed precision (`--policy.use_amp`): the loops in `low`, the losses in float32
             inputs, weights = cast_floats((inputs, weights), low)
-            run = recurrence  # the compiled loops are float32/float64 only
+        # The compiled loops are float32/float64 only: under mixed precision the Python ones run.
+        run = recurrence if low is not None else recurrence_cpp.loops(cfg.recurrence_backend, p[T])
         with torch.autocast(p[T].device.type, enabled=False):  # the loops write into preallocated buffers
             d, q_hat, a_hat, hidden, h_final = run(meta, *inputs, weights)
         if low is not None:
