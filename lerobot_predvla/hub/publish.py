@@ -44,7 +44,9 @@ CARD_TEMPLATE = importlib.resources.files("lerobot_predvla.hub") / "predvla_card
 CARD_FILE = "README.md"
 FRONTEND_DIR = "predvla_frontend"  # the artefact's folder inside a checkpoint and a Hub repo
 PUSH_PATTERNS = ("*.safetensors", "*.json", "*.yaml", "*.md")  # what LeRobot's own push uploads
-NEVER_PUSHED = (POSTERIOR_STORE_FILE,)
+# A saved folder's manifest lists that folder (posterior store included); each publishing route writes the manifest
+# of what it publishes instead.
+NEVER_PUSHED = (POSTERIOR_STORE_FILE, MANIFEST_FILE)
 TAGS = ("robotics", "lerobot", "predvla", "libero")
 PREDICTIVE_TAG = "predictive-coding"  # PredVLA and the ladder rungs that keep its predictive network
 # Frozen encoders (counted once: torchvision resnet18 without `fc`; sentence-transformers all-MiniLM-L6-v2).
