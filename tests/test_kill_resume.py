@@ -126,10 +126,12 @@ def test_the_kill_hook_checks_its_setting(tmp_path, monkeypatch):
 # ----- the real lerobot-train, killed -----------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def harness(synthetic_dataset, tmp_path_factory) -> tuple[HarnessConfig, dict]:
-    """Two kills of a real lerobot-train (8 steps, a checkpoint every 2): one at a random moment, one forced
+    """Two kills of a real lerobot-train (8 steps, a checkpoint every 2): one at a random step after the first
+    checkpoint, as soon as that step is logged (a later moment can fall after so short a run has ended), one forced
     inside the write of the weights of a checkpoint; resumed to the end."""
     cfg = HarnessConfig(output_dir=tmp_path_factory.mktemp("killed") / "run", dataset_root=synthetic_dataset,
-                        steps=8, save_freq=2, kills=2, forced_every=2, reference=False)
+                        steps=8, save_freq=2, kills=2, forced_every=2, min_kill_step=3, max_delay_s=0.0,
+                        reference=False)
     return cfg, run_harness(cfg)
 
 
