@@ -45,6 +45,7 @@ def test_inspect_reports_every_checkpoint_and_draws_the_figures(trained, tmp_pat
     assert len({len(v) for v in per_dim}) == 1 and len(q["open_loop"]) > 1
     assert all(0.0 <= x < 1e3 for v in per_dim for x in v) and sum(q["demo_spread"]) > 0.0
     assert set(q["removed"]) == {"proprio", "vision"} and all(x < 1.0 for x in q["removed"].values())
+    assert set(last["forces"]["posterior_term_grad_norm"]) == {"T", "V", "A_top", "A_bottom"}
     for name in ("open_loop_vs_demos", "language_swap", "prior_posterior_gap", "errors_over_episode",
                  "training_curves", "proprio_error_per_dim"):
         assert (out / f"{name}.png").stat().st_size > 1000
@@ -137,3 +138,43 @@ def test_er_variants_replay_other_inference_settings(trained, tmp_path, capsys):
 def test_inspect_refuses_a_bad_er_variant(tmp_path, capsys, flags):
     assert main(["inspect", str(tmp_path), *flags]) == 2
     assert "--er-variant" in capsys.readouterr().err
+
+
+def test_forces_split_the_gradient_by_term_and_weigh_the_decay_against_the_clipped_loss(trained, synthetic_dataset):
+    """Each Eq. 10 term's gradient reaches only the weights it depends on (the priors' maps only through C, the
+    visual head only through eps_v); the terms add up to the loss gradient; decay_over_loss is wd |p| against the
+    clipped loss gradient; Adam's momentum is read by parameter name from the checkpoint's optimizer state."""
+    import torch
+
+    from lerobot_predvla.policies.predvla import diagnostics as dx
+    from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy, term_weights, training_terms
+
+    path = trained / "checkpoints" / "last" / "pretrained_model"
+    policy = PredVLAPolicy.from_pretrained(path)
+    data, store = dx.TaskData.load(synthetic_dataset, policy), dx.load_store(path)
+    weight_decay, clip = dx.optimizer_settings(path)
+    momentum = dx.load_momentum(path, policy)
+    assert momentum is not None and set(momentum) == {n for n, _ in policy.named_parameters()}
+    report = dx.forces_report(policy, data, store, weight_decay, clip, momentum)
+    w = report["weights"]
+    prior = w["model.prior.0.weight"]["term_grad_norm"]
+    assert prior["complexity"] > 0 and prior["action_nll"] == prior["vision_error"] == prior["proprio_error"] == 0
+    head = w["model.v_head.0.weight"]["term_grad_norm"]
+    assert head["vision_error"] > 0 and head["action_nll"] == head["proprio_error"] == head["complexity"] == 0
+
+    episodes = torch.tensor(report["episodes"])
+    seq = data.sequences.batch(episodes, torch.device("cpu"))
+    model = policy.train().model
+    terms = training_terms(model, policy.config, seq, store[episodes].transpose(0, 1),
+                           model.language_term(seq["language"]))
+    loss = sum(weight * terms[k] for k, weight in term_weights(policy.config).items())
+    grads = torch.autograd.grad(loss, list(policy.parameters()), allow_unused=True)
+    norms = {n: 0.0 if g is None else float(g.norm()) for (n, _), g in zip(policy.named_parameters(), grads,
+                                                                           strict=True)}
+    total = sum(v**2 for v in norms.values()) ** 0.5
+    assert report["grad_norm"] == pytest.approx(total, rel=1e-4)
+    assert report["clip_scale"] == pytest.approx(min(1.0, clip / total), rel=1e-4)
+    p = dict(policy.named_parameters())["model.lang.weight"]
+    expected = weight_decay * float(p.detach().norm()) / (report["clip_scale"] * norms["model.lang.weight"])
+    assert w["model.lang.weight"]["decay_over_loss"] == pytest.approx(expected, rel=1e-3)
+    assert all(r["momentum_decay_over_loss"] > 0 for r in w.values())

@@ -11,7 +11,9 @@ checkpoint is inspected (cheap numbers, drawn over training steps) and the last 
 - language_swap.png: open-loop actions under each instruction against each task's mean demonstration;
 - proprio_error_per_dim.png: the proprioceptive prediction error per dimension, open loop and from the training
   posteriors, beside the demonstrations' spread around their task's mean;
-- training_curves.png (several checkpoints): the same numbers over training.
+- training_curves.png (several checkpoints): the same numbers over training, with the norms of the weights that
+  carry the task to the open-loop chain (W_lang, the priors' W_pri, U^T, W_td) and their weight decay against the
+  clipped loss gradient in Adam's momentum (training checkpoints: `forces` in inspect.json).
 
 `--er-variant KEY=VALUE[,KEY=VALUE]` (repeatable) replays error regression once more per variant with other
 inference settings on the same demonstrations and prints a table beside Table 2's settings: which settings bring
@@ -104,6 +106,9 @@ def run(args: argparse.Namespace) -> int:
         if store is not None:
             report["posteriors"] = dx.posterior_report(policy, data, store)
         report["proprio_error_per_dim"] = dx.proprio_report(policy, data, store)
+        settings = dx.optimizer_settings(path)
+        if store is not None and settings is not None:
+            report["forces"] = dx.forces_report(policy, data, store, *settings, dx.load_momentum(path, policy))
         history.append(report)
     last = history[-1]
     replay = None
@@ -137,6 +142,15 @@ def print_summary(report: dict) -> None:
     for name, p in report.get("posteriors", {}).items():
         print(f"posteriors {name:>8}: |c_q| {p['mean_norm']:.3f}, per-task means {p['between_task_mean_distance']:.3f}"
               f" apart vs {p['within_task_spread']:.3f} within a task, |c_q - c_p| {p['prior_gap']:.3f}")
+    if "forces" in report:
+        from lerobot_predvla.policies.predvla.diagnostics import TOP_WEIGHTS
+
+        f = report["forces"]
+        print(f"gradient norm {f['grad_norm']:.1f}, clipped to {f['grad_clip_norm']:g} (scale {f['clip_scale']:.3f});"
+              f" weight decay {f['weight_decay']:g} against the clipped loss gradient (batch / Adam's momentum):")
+        print("  " + ", ".join(f"{label} {f['weights'][name]['decay_over_loss']:.2f}"
+                               f"/{f['weights'][name].get('momentum_decay_over_loss', float('nan')):.2f}"
+                               for label, name in TOP_WEIGHTS.items()))
     q = report["proprio_error_per_dim"]
     if "removed" in q:
         print(f"the training posteriors remove {q['removed']['proprio']:.0%} of the open loop's proprioceptive error "
@@ -273,7 +287,7 @@ def plot_all(out: Path, data, history: list[dict], replay: dict | None) -> None:
 def training_curves(plt, steps: list[int], history: list[dict], tasks: int):
     """The mechanism over training, one panel per question: does the instruction pick the task's behaviour, do
     the posteriors explain what each demonstration adds, how far are priors from posteriors."""
-    fig, axes = plt.subplots(2, 3, figsize=(14, 6.4))
+    fig, axes = plt.subplots(2, 4, figsize=(18, 6.4))
     axes = axes.flatten()
     lang = [h["language"] for h in history]
     axes[0].plot(steps, [100 * x["open_loop_picks_own_task"] for x in lang], "o-")
@@ -298,6 +312,16 @@ def training_curves(plt, steps: list[int], history: list[dict], tasks: int):
     axes[5].plot(steps, [x["language_difference_drive_norm"] for x in lang], label="|W_lang (l_i - l_j)|")
     axes[5].plot(steps, [x["language_drive_norm"] for x in lang], label="|W_lang l|")
     axes[5].set(title="language drive of T (Eq. 4)")
+    if all("forces" in h for h in history):
+        from lerobot_predvla.policies.predvla.diagnostics import TOP_WEIGHTS
+
+        for label, name in TOP_WEIGHTS.items():
+            line, = axes[6].plot(steps, [h["forces"]["weights"][name]["norm"] for h in history], label=label)
+            axes[7].plot(steps, [h["forces"]["weights"][name].get("momentum_decay_over_loss", float("nan"))
+                                 for h in history], color=line.get_color(), label=label)
+        axes[7].axhline(1.0, color="0.6", ls="--")
+    axes[6].set(title="weight norms of the top of the hierarchy")
+    axes[7].set(title="Adam momentum: weight decay / clipped loss gradient (>1: pulled to 0)", yscale="log")
     for ax in axes:
         ax.set_xlabel("training step")
         ax.legend(fontsize=7)

@@ -9,18 +9,22 @@ Everything is computed offline against the training dataset's cached columns, wi
 - the training posteriors c_q (Eq. 10) per module: their size, their per-task means against the spread
   within a task, and their gap to the priors c_p (Eqs. 1-2) along the training rollout;
 - the proprioceptive prediction error per dimension (Eq. 7), open loop and from the training posteriors;
+- the forces on the network's weights (training checkpoints): each term of Eq. 10's gradient per weight, the
+  gradient clipping's scale, and the weight decay against the clipped loss gradient, on a fixed batch and in
+  Adam's own momentum (a weight whose decay outweighs its loss gradient is pulled toward zero by Adam);
 - error regression replayed on one demonstration per task (its own observations, step by step as when
   acting): per-step prediction errors (Eq. 7), prior-posterior gap per module (Eq. 8), free energy (Eq. 9),
   and its actions against the demonstrated ones next to the open-loop chain's.
 """
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
-from lerobot.utils.constants import ACTION
+from lerobot.utils.constants import ACTION, OPTIMIZER_STATE, TRAINING_STATE_DIR
 from safetensors.torch import load_file
 from torch import Tensor
 
@@ -28,7 +32,7 @@ from lerobot_predvla.utils.io import atomic_write_json
 
 from .configuration_predvla import MODULE_NAMES
 from .error_regression import ErrorRegression
-from .modeling_predvla import PredVLAPolicy
+from .modeling_predvla import PredVLAPolicy, term_weights, training_terms
 from .posterior_store import POSTERIOR_STORE_FILE
 from .sequence_table import EpisodeSequences, read_columns
 
@@ -287,6 +291,90 @@ def replay_er_variant(policy: PredVLAPolicy, data: TaskData, episodes: list[int]
     finally:
         for key, value in saved.items():
             setattr(policy.config, key, value)
+
+
+# The weights that carry the task to the open-loop chain, by their symbols in Eqs. 1-4.
+TOP_WEIGHTS = {"W_lang": "model.lang.weight", "W_pri T": "model.prior.0.weight", "W_pri V": "model.prior.1.weight",
+               "W_pri A_top": "model.prior.2.weight", "W_pri A_bottom": "model.prior.3.weight",
+               "U T": "model.latent.0.weight", "W_td V": "model.td.0.weight"}
+FORCES_BATCH = 32  # Table 2's batch; a fixed draw of training episodes (seed 0), the same at every checkpoint
+
+
+def forces_report(policy: PredVLAPolicy, data: TaskData, store: Tensor, weight_decay: float, grad_clip_norm: float,
+                  momentum: dict[str, Tensor] | None = None) -> dict:
+    """What trains each network weight at this checkpoint, on one batch of training episodes and their posteriors.
+
+    Per parameter tensor: its norm; the norm of each Eq. 10 term's (weighted) gradient; `decay_over_loss`, the
+    coupled L2 decay `weight_decay * p` that torch.optim.Adam adds to the gradient against the loss gradient after
+    LeRobot's clipping to `grad_clip_norm` (above 1, Adam moves the weight mostly toward zero); and, given Adam's
+    first moment (`momentum`, the checkpoint's exp_avg: the clipped loss gradient plus the decay, averaged over
+    ~10 steps), `momentum_decay_over_loss`, the same ratio in what Adam actually steps on. Per module: each term's
+    gradient on the posteriors c_q (which term moves them). Globally: the unclipped gradient norm and the clip scale.
+    """
+    cfg, model = policy.config, policy.model
+    generator = torch.Generator().manual_seed(0)
+    episodes = torch.randperm(store.shape[0], generator=generator)[:FORCES_BATCH]
+    seq = data.sequences.batch(episodes, torch.device("cpu"))
+    c_q = store[episodes].transpose(0, 1).clone().requires_grad_(True)
+    params = dict(policy.named_parameters())
+    was_training = policy.training
+    policy.train()
+    try:
+        with torch.enable_grad():
+            terms = training_terms(model, cfg, seq, c_q, model.language_term(seq["language"]))
+            grads = {}
+            for name, weight in term_weights(cfg).items():
+                g = torch.autograd.grad(weight * terms[name], [*params.values(), c_q], retain_graph=True,
+                                        allow_unused=True)
+                grads[name] = [torch.zeros_like(x) if gi is None else gi for gi, x in zip(g, [*params.values(), c_q],
+                                                                                          strict=True)]
+    finally:
+        policy.train(was_training)
+    n = len(params)
+    total = [sum(grads[k][i] for k in grads) for i in range(n)]
+    total_norm = float(torch.stack([g.norm() for g in total]).norm())
+    clip_scale = min(1.0, grad_clip_norm / (total_norm + 1e-6)) if grad_clip_norm > 0 else 1.0
+    weights = {}
+    for i, (name, p) in enumerate(params.items()):
+        decay = weight_decay * float(p.detach().norm())
+        row = {"norm": float(p.detach().norm()),
+               "term_grad_norm": {k: float(grads[k][i].norm()) for k in grads},
+               "decay_over_loss": decay / max(clip_scale * float(total[i].norm()), 1e-12)}
+        if momentum is not None and name in momentum:
+            loss_momentum = momentum[name].float() - weight_decay * p.detach()
+            row["momentum_decay_over_loss"] = decay / max(float(loss_momentum.norm()), 1e-12)
+        weights[name] = row
+    r = cfg.latent_dim
+    posterior = {m: {k: float(grads[k][n].unflatten(-1, (4, r))[..., j, :].norm()) for k in grads}
+                 for j, m in enumerate(MODULE_NAMES)}
+    return {"episodes": episodes.tolist(), "terms": {k: float(v.detach()) for k, v in terms.items()},
+            "grad_norm": total_norm, "grad_clip_norm": grad_clip_norm, "clip_scale": clip_scale,
+            "weight_decay": weight_decay, "weights": weights, "posterior_term_grad_norm": posterior}
+
+
+def optimizer_settings(checkpoint: Path) -> tuple[float, float] | None:
+    """(weight_decay, grad_clip_norm) of the training that wrote a checkpoint, from its train_config.json."""
+    path = Path(checkpoint) / "train_config.json"
+    if not path.is_file():
+        return None
+    optimizer = json.loads(path.read_text()).get("optimizer") or {}
+    return float(optimizer.get("weight_decay", 0.0)), float(optimizer.get("grad_clip_norm", 0.0))
+
+
+def load_momentum(checkpoint: Path, policy: PredVLAPolicy) -> dict[str, Tensor] | None:
+    """Adam's first moments of a training checkpoint by parameter name (LeRobot saves them by parameter index,
+    in `policy.parameters()` order), or None where the checkpoint has no optimizer state."""
+    path = Path(checkpoint).parent / TRAINING_STATE_DIR / OPTIMIZER_STATE
+    if not path.is_file():
+        return None
+    state = load_file(str(path))
+    out = {}
+    for i, (name, p) in enumerate(policy.named_parameters()):
+        m = state.get(f"state/{i}/exp_avg")
+        if m is None or m.shape != p.shape:
+            return None  # not this policy's optimizer layout
+        out[name] = m
+    return out
 
 
 def load_store(checkpoint: Path) -> Tensor | None:

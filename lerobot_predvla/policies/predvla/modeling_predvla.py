@@ -42,6 +42,34 @@ def training_complexity(complexity: Tensor, mask: Tensor, reduction: str) -> Ten
     return (complexity * mask.to(complexity.dtype)).sum() / mask.shape[1]
 
 
+def refresh_mask(valid: Tensor, interval: int) -> Tensor:
+    """Valid steps that bring a fresh visual observation (Section 4: eps_v only on refresh steps), (time, batch)."""
+    steps = torch.arange(valid.shape[0], device=valid.device)[:, None]
+    return valid & (steps % interval == 0)
+
+
+def training_terms(model: PredictiveModel, cfg: PredVLAConfig, seq: dict[str, Tensor], c_q: Tensor,
+                   lang_term: Tensor) -> dict[str, Tensor]:
+    """The four terms of Eq. 10 (unweighted) on the rollout driven by the posteriors c_q (time, batch, 4r) of the
+    sequences `seq` (`EpisodeSequences.batch`)."""
+    valid = seq["valid"]
+    traj = model.rollout(model.initial_state(valid.shape[1]), lang_term, c_q)
+    eps_v, eps_q = model.prediction_errors(traj, seq["vision"], seq["state"])
+    complexity = model.complexity(c_q, model.priors(traj), cfg.complexity_weights)
+    return {
+        "vision_error": masked_mean(eps_v, refresh_mask(valid, cfg.visual_refresh_interval)),
+        "proprio_error": masked_mean(eps_q, valid),
+        "action_nll": masked_mean(model.action_nll(traj, seq["action"]), valid),
+        "complexity": training_complexity(complexity, valid, cfg.complexity_reduction),
+    }
+
+
+def term_weights(cfg: PredVLAConfig) -> dict[str, float]:
+    """The weights of Eq. 10's terms: lambda_v, lambda_q, lambda_a and 1 for C (its w_l are inside it)."""
+    return {"vision_error": cfg.lambda_v, "proprio_error": cfg.lambda_q, "action_nll": cfg.lambda_a,
+            "complexity": 1.0}
+
+
 class PredVLAPolicy(PreTrainedPolicy):
     """PredVLA: language-conditioned predictive-coding policy (paper Section 3).
 
@@ -189,24 +217,11 @@ class PredVLAPolicy(PreTrainedPolicy):
         c_q = self.posterior_store.gather(episode_index.to(self.posterior_store.latents.device))
         model = self.model
         lang_term = model.language_term(seq["language"])
-        traj = model.rollout(model.initial_state(len(episode_index)), lang_term, c_q)
+        terms = training_terms(model, cfg, seq, c_q, lang_term)
+        loss = sum(weight * terms[name] for name, weight in term_weights(cfg).items())
         valid = seq["valid"]
-        steps = torch.arange(valid.shape[0], device=valid.device)[:, None]
-        fresh = valid & (steps % cfg.visual_refresh_interval == 0)  # visual error only on refresh steps
-        eps_v, eps_q = model.prediction_errors(traj, seq["vision"], seq["state"])
-        nll = model.action_nll(traj, seq["action"])
-        complexity = model.complexity(c_q, model.priors(traj), cfg.complexity_weights)
-        terms = {
-            "vision_error": masked_mean(eps_v, fresh),
-            "proprio_error": masked_mean(eps_q, valid),
-            "action_nll": masked_mean(nll, valid),
-            "complexity": training_complexity(complexity, valid, cfg.complexity_reduction),
-        }
-        loss = (
-            cfg.lambda_v * terms["vision_error"] + cfg.lambda_q * terms["proprio_error"]
-            + cfg.lambda_a * terms["action_nll"] + terms["complexity"]
-        )
         if cfg.open_loop_weight > 0.0:  # the same accuracy and action terms on the exact open-loop chain
+            fresh = refresh_mask(valid, cfg.visual_refresh_interval)
             open_loop = model.rollout(model.initial_state(len(episode_index)), lang_term, steps=valid.shape[0])
             eps_v, eps_q = model.prediction_errors(open_loop, seq["vision"], seq["state"])
             terms["open_loop_vision_error"] = masked_mean(eps_v, fresh)
