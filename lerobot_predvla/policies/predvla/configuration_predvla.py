@@ -15,6 +15,8 @@ LONG_HORIZON_SEQUENCE_LENGTH = 500
 CORRUPTION_CHANNELS = ("vision", "proprio")
 RECURRENCE_BACKENDS = ("auto", "python", "cpp")
 COMPLEXITY_REDUCTIONS = ("sum", "mean")  # training C of Eq. 10: summed over the sequence, or its mean
+# Table 2 enables gradient clipping without a value; this one binds only on spikes (see `grad_clip_norm`).
+GRAD_CLIP_NORM = 100.0
 PREDVLA_PAPER_PARAMETERS = 675_732  # Table 1, at the paper's LIBERO layout (2 cameras, proprio 9, action 7)
 
 
@@ -51,6 +53,14 @@ class PredVLAConfig(CachedFeaturesConfig):
             optimizer step (`PredVLAPolicy.update`; `posterior_store.py` says why this is the paper's per-episode
             reading). They are not parameters of LeRobot's optimizer, so `--optimizer.*` flags and gradient
             clipping (`grad_clip_norm`) apply to the network only.
+        grad_clip_norm: Clip of the network gradient's norm, applied by lerobot-train before Adam (Table 2:
+            "enabled", value not given; `CachedFeaturesConfig`'s 1.0 for the baselines). 100 for PredVLA, above
+            every gradient norm logged over the first 12,000 steps of Table 2's recipe on libero_object (8.6 to
+            74, median 41), so it only catches spikes. At 1.0 the clip bound at every step (scale 0.02-0.06), and
+            torch.optim.Adam's weight decay, added to the clipped gradient unscaled, then outweighed the loss
+            gradient 2-10x on the priors' maps of T, V and A_top (trained by the complexity term alone): their
+            norms fell from 4.6 to 0.2-0.6 in 10,000 steps (docs/research/table2.md; `predvla inspect` shows these
+            forces). The CPU recipes (`configs/policy/predvla_cpu*.json`) keep the 1.0 they were measured with.
         posterior_moments_dtype: Storage of the training posteriors' Adam moments: "float32" (default) or
             "bfloat16", a third less memory for large datasets (LIBERO-90, 4,500 demonstrations x 500 steps:
             4.6 GB instead of 6.9 GB; docs/speed.md). The update is computed in float32 and the posteriors stay
@@ -58,12 +68,12 @@ class PredVLAConfig(CachedFeaturesConfig):
         lr_decay_to: None (default): constant learning rates (Table 2). A value: the network learning rate decays
             along a cosine from `optimizer_lr` to this value over the run (`--steps`, at most `train_steps`;
             LeRobot's `cosine_decay_with_warmup`, no warm-up); `posterior_lr` stays constant. An option for
-            experiments (docs/libero_object_cpu.md measures a cool-down with it).
+            experiments (docs/research/libero_object_cpu.md measures a cool-down with it).
         lambda_v: Weight of the visual prediction error (Eq. 10; Table 2: 1).
         lambda_q: Weight of the proprioceptive prediction error (Eq. 10; Table 2: 1). Proprioception is raw radians,
             so at 1 its error is tiny against the complexity term; the CPU recipe
             `configs/policy/predvla_cpu_lambda_q100.json` trains with 100 (about one over the joint angles' variance)
-            and keeps `er_lambda_q` at 1 (docs/libero_object_cpu.md).
+            and keeps `er_lambda_q` at 1 (docs/research/lambda_q100.md).
         lambda_a: Weight of the action negative log-likelihood (Eq. 10; Table 2: 1).
         complexity_weights: w_l of (T, V, A_top, A_bottom) in the training complexity term (Eq. 8;
             Table 2: (0.05, 0.02, 0.02, 0.01)).
@@ -78,7 +88,7 @@ class PredVLAConfig(CachedFeaturesConfig):
             prior (Section 3.5; the rollout of `er_iterations=0`). Eq. 10 trains the states regenerated from
             the posteriors, while acting starts every step from the priors; on short CPU schedules the task
             then drifts into the training posteriors and the open-loop chain degrades
-            (docs/libero_object_cpu.md). This term trains the prior chain itself to follow the
+            (docs/research/libero_object_cpu.md). This term trains the prior chain itself to follow the
             demonstrations; the CPU recipe `configs/policy/predvla_cpu.json` uses it.
         use_amp: LeRobot's own flag (`--policy.use_amp`, default False: float32, as measured against the paper's
             recipe). True trains with bfloat16 mixed precision: the recurrence's loops and the heads run in bfloat16
@@ -136,6 +146,7 @@ class PredVLAConfig(CachedFeaturesConfig):
     recurrence_backend: str = "auto"
 
     # Training (Table 2).
+    grad_clip_norm: float = GRAD_CLIP_NORM
     posterior_lr: float = 1e-2
     posterior_moments_dtype: str = "float32"
     lr_decay_to: float | None = None
