@@ -207,3 +207,29 @@ def test_runs_share_their_starts_only_with_the_same_seed_and_resets():
     resets = {**official, "init_states": False, "eval_seed": 1000, "n_episodes_per_task": 5}
     assert same_starts(resets, dict(resets)) and not same_starts(resets, official)
     assert not same_starts(resets, {**resets, "n_episodes_per_task": 10})
+
+
+def test_starts_and_mechanism_sections_read_the_files_beside_the_report(runs, tmp_path):
+    """start_spread.json and inspect/seed<N>/inspect.json beside the report become two sections with their numbers."""
+    out = tmp_path / "report"
+    out.mkdir()
+    spread = {"tasks": {str(t): {kind: {"starts": 50, "joint_std": j, "object_std": {"a": s, "b": 2 * s},
+                                        "object_mean": {"a": [0.1, 0.2], "b": [0.3, 0.4 + d]}}
+                                 for kind, j, s, d in (("demonstrations", 0.02, 0.002, 0.003),
+                                                       ("official", 0.01, 0.001, 0.0))}
+                        for t in range(2)}}
+    (out / "start_spread.json").write_text(json.dumps(spread))
+    step = {"language": {"open_loop_picks_own_task": 0.3, "mean_language_swap_mse": 0.0271, "mean_demo_gap": 0.1033},
+            "proprio_error_per_dim": {"removed": {"proprio": 0.29, "vision": 0.087}},
+            "posteriors": {m: {"prior_gap": g} for m, g in zip(("T", "V", "A_top", "A_bottom"), (0.1, 0.2, 0.3, 0.4),
+                                                              strict=True)}}
+    (out / "inspect" / "seed0").mkdir(parents=True)
+    (out / "inspect" / "seed0" / "inspect.json").write_text(json.dumps(
+        {"history": [{"step": 5000, **step}, {"step": 10000, **step}]}))
+    write_report(runs, out)
+    text = (out / "report.md").read_text()
+    assert "## Demonstrations' starts" in text and "within 3.0 mm" in text
+    assert "| arm joints, std over starts (rad) | 0.0200 | 0.0100 |" in text
+    assert "| objects, std of x, y over starts (mm) | 3.00 | 1.50 |" in text
+    assert "## The mechanism over training" in text and "### seed0" in text
+    assert "| 10,000 | 30 | 0.027 / 0.103 | 29 / 9 | 0.100 / 0.200 / 0.300 / 0.400 |" in text

@@ -26,6 +26,7 @@ import numpy as np
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
 from lerobot_predvla.experiments.sweep import eval_run_dir
 from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
+from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
 SUMMARY_FILE = "report.json"
@@ -47,6 +48,9 @@ PUBLISHED_REFERENCES = (
 )
 PARAMETERLESS_REFERENCES = (("Diffusion Policy", 72.4),)  # its parameter count is not given with the result
 MISSING = "—"
+START_SPREAD_FILE = "start_spread.json"  # beside the report: `python -m lerobot_predvla.libero.start_spread --demos`
+INSPECT_DIR = "inspect"  # beside the report: inspect/seed<N>/ from `predvla inspect <train dir> --every N`
+CURVES_FIGURE = "training_curves.png"
 
 
 class ReportError(ValueError):
@@ -657,6 +661,67 @@ def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
 
 
 # ----- report ----------------------------------------------------------------------------------------------
+def starts_section(path: Path) -> list[str]:
+    """The demonstrations' starts against the official init states (mean over tasks of `start_spread.json`)."""
+    if not path.is_file():
+        return []
+    tasks = json.loads(path.read_text())["tasks"]
+
+    def mean(kind: str, key: str) -> float:
+        return float(np.mean([t[kind][key] if key == "joint_std" else np.mean(list(t[kind][key].values()))
+                              for t in tasks.values()]))
+
+    gap_mm = max(1000 * float(np.abs(np.subtract(t["demonstrations"]["object_mean"][o],
+                                                 t["official"]["object_mean"][o])).max())
+                 for t in tasks.values() for o in t["official"]["object_mean"])
+    return ["", "## Demonstrations' starts", "",
+            f"The demonstrations' first simulator states against the official init states, mean over {len(tasks)} "
+            f"tasks (`{path.name}`); every object's mean position lies within {gap_mm:.1f} mm of the official one.",
+            "", _table(["", "demonstrations", "official init states"], [
+                ["arm joints, std over starts (rad)", f"{mean('demonstrations', 'joint_std'):.4f}",
+                 f"{mean('official', 'joint_std'):.4f}"],
+                ["objects, std of x, y over starts (mm)", f"{1000 * mean('demonstrations', 'object_std'):.2f}",
+                 f"{1000 * mean('official', 'object_std'):.2f}"]])]
+
+
+def mechanism_rows(history: list[dict]) -> list[list[str]]:
+    """One row per inspected checkpoint of `predvla inspect`'s history."""
+    rows = []
+    for h in history:
+        lang, removed, post = h["language"], h["proprio_error_per_dim"].get("removed"), h.get("posteriors")
+        rows.append([
+            f"{h['step']:,}" if h.get("step") is not None else MISSING,
+            f"{100 * lang['open_loop_picks_own_task']:.0f}",
+            f"{lang['mean_language_swap_mse']:.3f} / {lang['mean_demo_gap']:.3f}",
+            f"{100 * removed['proprio']:.0f} / {100 * removed['vision']:.0f}" if removed else MISSING,
+            " / ".join(f"{post[m]['prior_gap']:.3f}" for m in MODULE_NAMES) if post else MISSING,
+        ])
+    return rows
+
+
+def mechanism_section(out: Path) -> list[str]:
+    """Per training seed inspected beside the report (`inspect/seed<N>/inspect.json`): the mechanism's numbers per
+    checkpoint and the figure over training."""
+    found = sorted((out / INSPECT_DIR).glob("seed*/inspect.json"), key=lambda p: p.parent.name)
+    if not found:
+        return []
+    lines = ["", "## The mechanism over training", "",
+             "`predvla inspect` on the training checkpoints, without the simulator: how often the exact open loop is "
+             "closest to its own task's mean demonstration (%, chance: one task in the number of tasks); how far "
+             "swapping the instruction moves the open-loop actions, against how far the tasks' mean demonstrations "
+             "lie apart (action MSE); the open-loop prediction error the training posteriors remove (%, "
+             "proprioceptive / visual); the training prior-posterior gap per module (" + " / ".join(MODULE_NAMES)
+             + ")."]
+    for path in found:
+        seed = path.parent.name
+        lines += ["", f"### {seed}", "", _table(["step", "open loop picks own task (%)", "language swap / demo gap",
+                                                 "error removed (%)", "prior gap"],
+                                                mechanism_rows(json.loads(path.read_text())["history"]))]
+        if (path.parent / CURVES_FIGURE).is_file():
+            lines += ["", f"![{seed} over training]({INSPECT_DIR}/{seed}/{CURVES_FIGURE})"]
+    return lines
+
+
 def write_report(runs_dir: Path, out: Path) -> dict:
     """Build tables, figures, `report.md` and `report.json` in `out`; returns the summary."""
     import matplotlib
@@ -713,6 +778,7 @@ def write_report(runs_dir: Path, out: Path) -> dict:
             sections += ["", table]
         if has_figure:
             sections += ["", f"![{title}]({FIGURES[figure]})"]
+    sections += starts_section(out / START_SPREAD_FILE) + mechanism_section(out)
     stages = stages_section(records, runs_dir)
     if stages:
         sections += ["", "## Stages: wall time and commands", "", *stages]
