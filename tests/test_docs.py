@@ -106,23 +106,92 @@ def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys
 
 
 # ----- shared configs do not pin the training machine's device ---------------------------------------------
-@pytest.mark.parametrize("checkpoint", sorted(p.parent.name for p in (REPO / "checkpoints").glob("*/config.json")))
-def test_shipped_checkpoint_config_follows_the_machine(checkpoint):
-    from lerobot.configs.policies import PreTrainedConfig
-    from lerobot.utils.device_utils import auto_select_torch_device
+SHIPPED = sorted(p.parent.name for p in (REPO / "checkpoints").glob("*/config.json"))
 
+
+@pytest.fixture
+def best_device_cuda(monkeypatch):
+    """A machine whose best device is CUDA, as LeRobot's configs see it: a stored device that is available is kept,
+    a missing one becomes the best available."""
+    import torch
+    from lerobot.configs import policies
+
+    monkeypatch.setattr(policies, "auto_select_torch_device", lambda: torch.device("cuda"))
+    monkeypatch.setattr(policies, "is_torch_device_available", lambda device: device in ("cpu", "cuda"))
+
+
+@pytest.mark.parametrize("checkpoint", SHIPPED)
+def test_shipped_checkpoint_configs_leave_the_device_unset(checkpoint):
     path = REPO / "checkpoints" / checkpoint
     assert json.loads((path / "config.json").read_text())["device"] is None
-    assert PreTrainedConfig.from_pretrained(path).device == auto_select_torch_device().type
+    assert json.loads((path / "train_config.json").read_text())["policy"]["device"] is None
+
+
+def test_shipped_checkpoint_follows_the_machine(best_device_cuda):
+    """`config.json` (`--policy.path`, `from_pretrained`) and `train_config.json` (`lerobot-train --config_path=...`)
+    loaded by LeRobot on a machine whose best device is CUDA: the shipped checkpoint runs and trains there."""
+    from lerobot.configs.policies import PreTrainedConfig
+    from lerobot.configs.train import TrainPipelineConfig
+
+    path = REPO / "checkpoints/predvla_libero_object"
+    assert PreTrainedConfig.from_pretrained(path).device == "cuda"
+    assert TrainPipelineConfig.from_pretrained(path).policy.device == "cuda"
+
+
+@pytest.mark.parametrize("checkpoint", SHIPPED)
+def test_shipped_checkpoint_processors_follow_the_policy(checkpoint):
+    """Loaded as `lerobot-eval` loads them (the preprocessor's device step replaced by the policy's device), the
+    processors move the inputs to the policy's device and the actions to the CPU (the environment's); the front-end
+    step records no device (its encoders follow the images)."""
+    from lerobot.configs.policies import PreTrainedConfig
+    from lerobot.policies.factory import make_pre_post_processors
+    from lerobot.processor import DeviceProcessorStep
+
+    from lerobot_predvla.hub.publish import FRONTEND_STEP, PREPROCESSOR_FILE
+
+    path = REPO / "checkpoints" / checkpoint
+    steps = json.loads((path / PREPROCESSOR_FILE).read_text())["steps"]
+    assert all("device" not in s["config"] for s in steps if s["registry_name"] == FRONTEND_STEP)
+    config = PreTrainedConfig.from_pretrained(path)
+    pre, post = make_pre_post_processors(config, pretrained_path=str(path),
+                                         preprocessor_overrides={"device_processor": {"device": config.device}})
+    assert [s.device for s in pre.steps if isinstance(s, DeviceProcessorStep)] == [config.device]
+    assert [s.device for s in post.steps if isinstance(s, DeviceProcessorStep)] == ["cpu"]
 
 
 def test_push_clears_the_training_device(tmp_path):
-    config, train = tmp_path / "config.json", tmp_path / "train_config.json"
+    config, train, pre = tmp_path / "config.json", tmp_path / "train_config.json", tmp_path / "policy_preprocessor.json"
     config.write_text(json.dumps({"type": "predvla", "device": "cuda", "frontend_dir": "/data/frontend"}))
     train.write_text(json.dumps({"policy": {"type": "predvla", "device": "cpu"}, "output_dir": "/runs/x"}))
-    published = without_machine_paths({"config.json": config, "train_config.json": train})
+    steps = [{"registry_name": "predvla_frontend_processor", "config": {"artefact": None, "device": "cpu"}},
+             {"registry_name": "device_processor", "config": {"device": "cpu", "float_dtype": None}}]
+    pre.write_text(json.dumps({"name": "policy_preprocessor", "steps": steps}))
+    published = without_machine_paths({"config.json": config, "train_config.json": train,
+                                       "policy_preprocessor.json": pre})
     assert json.loads(published["config.json"]) == {"type": "predvla", "device": None, "frontend_dir": None}
     assert json.loads(published["train_config.json"])["policy"]["device"] is None
+    assert [s["config"] for s in json.loads(published["policy_preprocessor.json"])["steps"]] == [
+        {"artefact": None}, {"device": "cpu", "float_dtype": None}]  # LeRobot's loaders replace the device step's
+
+
+def test_report_docs_rewrites_a_checkpoint_that_pins_the_device_and_keeps_its_manifest(tmp_path):
+    from lerobot_predvla.experiments.headline import stale_checkpoint_files
+    from lerobot_predvla.utils.io import atomic_write_bytes
+    from lerobot_predvla.utils.manifest import verify_manifests, write_manifest
+
+    checkpoint = tmp_path / "checkpoints/shipped"
+    shutil.copytree(REPO / "checkpoints/predvla_libero_object", checkpoint)
+    train = checkpoint / "train_config.json"
+    train.write_text(train.read_text().replace('"device": null', '"device": "cpu"'))
+    write_manifest(checkpoint)
+    weights = (checkpoint / "model.safetensors").read_bytes()
+    stale = stale_checkpoint_files(tmp_path)
+    assert {checkpoint / "train_config.json", checkpoint / "sha256_manifest.json"} <= set(stale)
+    for path, data in stale.items():
+        atomic_write_bytes(path, data)
+    assert json.loads(train.read_text())["policy"]["device"] is None
+    assert verify_manifests(checkpoint) and (checkpoint / "model.safetensors").read_bytes() == weights
+    assert stale_checkpoint_files(tmp_path) == {}
 
 
 # ----- every documented command exists ---------------------------------------------------------------------
@@ -186,11 +255,11 @@ def test_bracket_arguments_are_quoted():
     assert not bare, "\n".join(bare)
 
 
-# ----- model cards of the shipped checkpoints --------------------------------------------------------------
-def test_shipped_model_cards_are_rendered_from_their_checkpoints():
-    from lerobot_predvla.experiments.headline import stale_cards
+# ----- model cards and configs of the shipped checkpoints -------------------------------------------------
+def test_shipped_configs_and_model_cards_are_as_published():
+    from lerobot_predvla.experiments.headline import stale_checkpoint_files
 
-    assert stale_cards(REPO) == {}, "run `predvla report --docs` and commit checkpoints/*/README.md"
+    assert stale_checkpoint_files(REPO) == {}, "run `predvla report --docs` and commit checkpoints/*/"
 
 
 def test_model_card_states_the_checkpoints_own_training_and_results():

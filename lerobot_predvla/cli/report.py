@@ -1,6 +1,6 @@
 """`predvla report`: paper-format tables, figures and a Markdown report from the records of `predvla sweep`; with
 `--docs`, the headline results table of README.md and docs/results.md from the committed results/*/report.json and
-the model cards of the committed checkpoints."""
+the configs (no pinned device or machine paths) and model cards of the committed checkpoints."""
 
 import argparse
 import sys
@@ -22,9 +22,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, help="Report directory (report.md, report.json, PNGs).")
     parser.add_argument("--docs", action="store_true",
                         help=f"Rewrite the headline block of {README} and {RESULTS_DOC} from results/*/report.json "
-                             "and the model cards of checkpoints/*/ (no RUNS_DIR).")
+                             "and the configs and model cards of checkpoints/*/ (no RUNS_DIR).")
     parser.add_argument("--check", action="store_true",
-                        help="With --docs: change nothing; exit 1 when a headline block differs from the reports.")
+                        help="With --docs: change nothing; exit 1 when a headline block or checkpoint file differs.")
     parser.add_argument("--root", type=Path, default=Path("."),
                         help="With --docs: the repository root (holding README.md, docs/ and results/).")
     parser.set_defaults(func=run)

@@ -26,6 +26,7 @@ from string import Template
 
 from huggingface_hub import CommitOperationAdd, HfApi
 from lerobot.configs import PreTrainedConfig
+from lerobot.utils.constants import POLICY_PREPROCESSOR_DEFAULT_NAME
 
 from lerobot_predvla.experiments.report import SUMMARY_FILE, load_summary
 from lerobot_predvla.frontend.artefact import METADATA_FILE, TENSORS_FILE
@@ -53,6 +54,7 @@ PREDICTIVE_TAG = "predictive-coding"  # PredVLA and the ladder rungs that keep i
 RESNET18_BACKBONE_PARAMS = 11_176_512
 MINILM_PARAMS = 22_713_216
 FRONTEND_STEP = "predvla_frontend_processor"
+PREPROCESSOR_FILE = f"{POLICY_PREPROCESSOR_DEFAULT_NAME}.json"
 MACHINE_FIELDS = ("frontend_dir", "device")  # policy config fields that name the training machine's resources
 # Config fields that hold the paper's training length and batch, not this run's (the card's Training data has those).
 PAPER_ONLY_FIELDS = ("train_steps", "train_batch_size")
@@ -132,8 +134,14 @@ def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
 
     `frontend_dir` (the artefact is published beside the weights and inside the preprocessor), the dataset root and
     the output directory name places on the training machine only; loading ignores them once they are None. The
-    device is the training machine's too: LeRobot keeps a stored device that is available (a checkpoint trained on
-    the CPU would run on the CPU of a GPU machine) and picks the best available one when it is None.
+    device is the training machine's too. LeRobot keeps a stored device that is available and picks the best
+    available one when it is None: `config.json`'s when loading the policy (`--policy.path`, `from_pretrained`), and
+    `train_config.json`'s policy device when training from it (`lerobot-train --config_path=...`, `--resume`). Both
+    are cleared. The processors keep theirs: a device step needs a device (None fails to load); `lerobot-eval`,
+    `lerobot-rollout`, `lerobot-train` and LeRobot's policy server replace the preprocessor's with the policy's, and
+    the postprocessor's `cpu` is where actions go (the environment or robot), not where the policy trained. The
+    front-end step's `device` of older checkpoints is ignored when loading (the encoders follow the images) and
+    dropped.
     """
     published: dict[str, Path | bytes] = dict(files)
     if "config.json" in files:
@@ -148,6 +156,12 @@ def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
         if isinstance(train_cfg.get("policy"), dict):
             train_cfg["policy"].update({k: None for k in MACHINE_FIELDS if k in train_cfg["policy"]})
         published["train_config.json"] = json.dumps(train_cfg, indent=4).encode()
+    if PREPROCESSOR_FILE in files:
+        preprocessor = read_json(files, PREPROCESSOR_FILE)
+        for step in preprocessor.get("steps", []):
+            if step.get("registry_name") == FRONTEND_STEP:
+                step.get("config", {}).pop("device", None)
+        published[PREPROCESSOR_FILE] = json.dumps(preprocessor, indent=2).encode()  # LeRobot's layout
     return published
 
 
@@ -155,8 +169,8 @@ def frontend_metadata(files: dict[str, Path | bytes]) -> dict | None:
     """The artefact's `frontend.json`, from the published folder or from the preprocessor's front-end step."""
     if f"{FRONTEND_DIR}/{METADATA_FILE}" in files:
         return read_json(files, f"{FRONTEND_DIR}/{METADATA_FILE}")
-    if "policy_preprocessor.json" in files:
-        for step in read_json(files, "policy_preprocessor.json").get("steps", []):
+    if PREPROCESSOR_FILE in files:
+        for step in read_json(files, PREPROCESSOR_FILE).get("steps", []):
             if step.get("registry_name") == FRONTEND_STEP and step.get("config", {}).get("artefact"):
                 return step["config"]["artefact"]
     return None
@@ -515,13 +529,16 @@ def render_card(
 
 
 # ----- upload ----------------------------------------------------------------------------------------------
-def repository_card(checkpoint: Path, root: Path) -> str:
-    """The model card of a checkpoint directory committed in this repository (`root`): loaded from its path, with
-    every evaluation recorded under `root/results/`. `predvla report --docs` writes it as the checkpoint's README.md."""
+def repository_files(checkpoint: Path, root: Path) -> dict[str, bytes]:
+    """The configs and model card of a checkpoint directory committed in this repository (`root`), as every publishing
+    route writes them: configs without the training machine's paths and device (`without_machine_paths`), the card
+    loaded from the checkpoint's path with every evaluation recorded under `root/results/`. `predvla report --docs`
+    writes them into the checkpoint (its weights are never rewritten)."""
     checkpoint, root = Path(checkpoint).resolve(), Path(root).resolve()
     files = without_machine_paths(publishable_files(checkpoint))
-    return render_card(files, checkpoint.relative_to(root).as_posix(),
+    card = render_card(files, checkpoint.relative_to(root).as_posix(),
                        records=evaluation_records(checkpoint, root / "results"))
+    return {**{rel: src for rel, src in files.items() if isinstance(src, bytes)}, CARD_FILE: card.encode()}
 
 
 def upload_files(
