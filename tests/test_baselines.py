@@ -54,7 +54,7 @@ def run(policy, observations: list[dict]) -> torch.Tensor:
         return torch.stack([policy.select_action(o) for o in observations])
 
 
-# Named CPU recipes beside the paper's rows (docs/libero_object_cpu.md).
+# Named CPU recipes beside the paper's rows (docs/research/libero_object_cpu.md).
 CPU_RECIPES = {"predvla_cpu", "predvla_cpu_lambda_q100"}
 
 

@@ -23,7 +23,7 @@ SKILL_ORDER = {"open": 0, "turnon": 0, "in": 1, "on": 1, "close": 2}  # plan ord
 # How the expert picks between a finger direction and its half turn (`predvla demos --half-turn`):
 # "nearest": the one nearer the current finger direction (every recorded dataset so far). Near a tie, as on three
 #   libero_object tasks when the arm's start carries the official init states' joint noise, the start noise
-#   decides, and demonstrations of one task end on wrist angles half a turn apart (docs/libero_object_cpu.md).
+#   decides, and demonstrations of one task end on wrist angles half a turn apart (docs/research/arm_start_pose.md).
 # "wrist_centre": the one that leaves the wrist joint nearer the middle of its range; ties are far from the start.
 HALF_TURN_RULES = ("nearest", "wrist_centre")
 DEFAULT_HALF_TURN = "nearest"  # every recorded dataset; "wrist_centre" fails two libero_goal tasks (docs/libero.md)
