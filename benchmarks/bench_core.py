@@ -8,7 +8,8 @@ regression is timed on that default path (`er_ms_fast_*`) and with the Python lo
 `recurrence_backend="python"`), in alternation with their common floor (the two issue the same matmuls; checked).
 The training step is also timed as `lerobot-train` takes it (`bench_lerobot_train.py`), in alternation with the
 fast step at the same batch and sequence length. `control_step_ms_p50/_p99` time a whole control step at batch 1 on
-the default path: the front end's ResNet18 on refresh steps, error regression, the action.
+the default path: the front end's ResNet18 on refresh steps, error regression, the action. `eval_peak_rss_gb` is the
+peak RSS of one `lerobot-eval` of the shipped checkpoint at batch 10 (`bench_eval_memory.py`).
 
     python -m benchmarks.bench_core --quick
 """
@@ -27,6 +28,7 @@ import torch
 from torch import Tensor, nn
 from torch.utils._python_dispatch import TorchDispatchMode
 
+from benchmarks.bench_eval_memory import eval_peak_rss
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean, training_complexity
@@ -330,6 +332,7 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
         results[f"control_step_ms_p{q}"] = percentile(latencies, q)
     results["control_steps"] = len(latencies)
     results.update(frontend_dataset_rates(*FRONTEND_DATASET[quick]))
+    results.update(eval_peak_rss())  # one lerobot-eval at batch 10 (benchmarks/bench_eval_memory.py)
 
     results.update(
         threads=threads, batch=batch, steps=steps, window=config.er_window, er_iterations=config.er_iterations,
@@ -372,6 +375,7 @@ def run_benchmark(quick: bool = False, threads: int = 1, batch: int = 32, steps:
           f"{results['frontend_frames_per_s']:.1f} frames/s (fp32 front end), "
           f"{results['frontend_frames_per_s_bf16']:.1f} (bf16); fit-frontend {results['frontend_fit_frames_per_s']:.1f}"
           f" / {results['frontend_fit_frames_per_s_bf16']:.1f}")
+    print(f"  peak RSS of one lerobot-eval: {results['eval_peak_rss_gb']} GB ({results['eval_peak_rss']})")
     print(f"  training step B={STORE_BATCH} T={steps} with a posterior store of 100 / 10,000 episodes: "
           f"{results['store_step_ms_100ep']:.1f} / {results['store_step_ms_10000ep']:.1f} ms "
           f"(ratio {results['store_10000_over_100']:.2f})")

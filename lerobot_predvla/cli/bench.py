@@ -1,7 +1,10 @@
 """`predvla bench`: speed of the recurrent core, eager reference vs fused fast path vs matmul-only floor.
 
 Runs `benchmarks/bench_core.py` from the repository checkout (editable install): prints a table of medians
-and ratios, and as its last line one JSON object with every figure.
+and ratios, and as its last line one JSON object with every figure. `eval_peak_rss_gb` is the peak RSS (GB, 1e9
+bytes) of one `lerobot-eval` of the shipped libero_object checkpoint at `--eval.batch_size=10`, 20-step episodes of
+task 0, sync environments (`benchmarks/bench_eval_memory.py`, ~3-5 min); null, with the reason in `eval_peak_rss`,
+where the simulator is not installed.
 """
 
 import argparse

@@ -1,11 +1,19 @@
 """The `predvla_libero` gym env: LeRobot's LiberoEnv with end-of-step observations and sparse rendering.
 
+Every sub-environment of a process renders through one `SharedRenderer` (one GL context, one MuJoCo render
+context per set of rendering assets) instead of robosuite's own context per environment, rebuilt at each
+hard reset: on CPU (llvmpipe) each of those held its textures, meshes, shadow map and framebuffers in
+process memory (docs/speed.md, "Evaluation memory"). The images are the same, bit for bit
+(tests/test_eval_memory.py).
+
 A fault in one sub-environment (an exception from MuJoCo or robosuite, a non-finite simulator state, an
 unstable-simulation warning or a non-finite action) ends that episode as a failure with its reason; the
 other sub-environments and the run go on. Faults are kept in `faults` and listed in `eval_info.json`.
 """
 
 import logging
+import threading
+import zlib
 from functools import partial
 
 import gymnasium as gym
@@ -19,11 +27,92 @@ check_libero_config()  # before LIBERO reads its config: a stale one otherwise f
 
 from lerobot.envs.libero import LiberoEnv, _get_suite, _select_task_ids, parse_camera_names  # noqa: E402
 from lerobot.envs.utils import NEW_ROLLOUT_OPTION  # noqa: E402
-from libero.libero.envs import OffScreenRenderEnv  # noqa: E402
+from libero.libero.envs.env_wrapper import ControlEnv  # noqa: E402
 from robosuite import macros  # noqa: E402
+from robosuite.utils.binding_utils import GLContext  # noqa: E402  (robosuite's choice for MUJOCO_GL)
 
 IMAGE_FRESH = "image_fresh"  # becomes `observation.image_fresh` in LeRobot's preprocess_observation
 UNSTABLE = mujoco.mjtWarning.mjWARN_BADQACC  # MuJoCo's "NaN, Inf or huge value in QACC": it resets the state
+# What `mujoco.MjrContext` uploads from a model (textures, meshes, height fields, skins, flexes) besides the
+# visual settings: two models equal in these render alike through one context.
+RENDER_ASSET_PREFIXES = ("tex_", "mesh_", "hfield_", "skin_", "flex_")
+
+
+def render_assets_key(model: mujoco.MjModel) -> str:
+    """A digest of everything a MuJoCo render context takes from `model` (its assets and visual settings).
+
+    The sub-environments of one task load the same scene, and robosuite's hard reset reloads it at every
+    episode: the key stays the same, so the shared render context is kept. Computed once per model (each reset):
+    CRC-32 per array, 3-4x faster than a cryptographic hash over a LIBERO scene's ~200 MB of assets.
+    """
+    parts = [repr((model.vis, model.stat))]
+    for name in sorted(n for n in dir(model) if n.startswith(RENDER_ASSET_PREFIXES)):
+        value = getattr(model, name)
+        if isinstance(value, np.ndarray):
+            parts.append(f"{name}{value.shape}{value.dtype}:{zlib.crc32(np.ascontiguousarray(value).view(np.uint8))}")
+    return "\n".join(parts)
+
+
+class SharedRenderer:
+    """One GL context and one MuJoCo render context for every simulator of the process.
+
+    Draws exactly as robosuite's `MjRenderContextOffscreen.render` + `read_pixels` (same scene size, camera,
+    visual/collision geom groups, offscreen buffer and font scale), for any model whose `render_assets_key`
+    matches the context's; a model with other assets (the next task) replaces the context. The GL context is
+    made current at every call: robosuite never does, so it drew with whichever context was created last.
+    """
+
+    MAX_GEOMS = 1000  # robosuite's MjvScene size
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._gl = None
+        self._key: str | None = None
+        self._context: mujoco.MjrContext | None = None
+        self._scene: mujoco.MjvScene | None = None
+        self._camera = mujoco.MjvCamera()
+        self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._option = mujoco.MjvOption()
+        self._perturb = mujoco.MjvPerturb()
+        self._perturb.active, self._perturb.select, self._perturb.skinselect = 0, 0, -1
+        self.contexts_built = 0  # render contexts made so far (tests check sub-environments share one)
+
+    def _bind(self, model: mujoco.MjModel, key: str, width: int, height: int) -> None:
+        if self._gl is None:  # robosuite's context class for MUJOCO_GL (it ignores the size arguments)
+            self._gl = GLContext(max_width=width, max_height=height, device_id=-1)
+        self._gl.make_current()
+        if key == self._key and width <= self._context.offWidth and height <= self._context.offHeight:
+            return
+        if self._context is not None:
+            self._context.free()
+        # As robosuite's update_offscreen_size: the model's offscreen size, grown to the image if smaller.
+        model.vis.global_.offwidth = max(width, model.vis.global_.offwidth)
+        model.vis.global_.offheight = max(height, model.vis.global_.offheight)
+        self._context = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._context)
+        self._scene = mujoco.MjvScene(model, maxgeom=self.MAX_GEOMS)
+        self._key = key
+        self.contexts_built += 1
+
+    def render(self, env, key: str, camera: str, width: int, height: int) -> np.ndarray:
+        """RGB image (height, width, 3) of robosuite env `env`'s camera `camera`, bottom row first (OpenGL);
+        `key` is `render_assets_key` of its model."""
+        model, data = env.sim.model._model, env.sim.data._data
+        with self._lock:
+            self._bind(model, key, width, height)
+            self._camera.fixedcamid = env.sim.model.camera_name2id(camera)
+            self._option.geomgroup[0] = 1 if env.render_collision_mesh else 0
+            self._option.geomgroup[1] = 1 if env.render_visual_mesh else 0
+            mujoco.mjv_updateScene(model, data, self._option, self._perturb, self._camera,
+                                   mujoco.mjtCatBit.mjCAT_ALL, self._scene)
+            viewport = mujoco.MjrRect(0, 0, width, height)
+            mujoco.mjr_render(viewport, self._scene, self._context)
+            image = np.empty((height, width, 3), dtype=np.uint8)
+            mujoco.mjr_readPixels(image, None, viewport, self._context)
+        return image
+
+
+RENDERER = SharedRenderer()
 
 
 class SparseRenderLiberoEnv(LiberoEnv):
@@ -41,6 +130,7 @@ class SparseRenderLiberoEnv(LiberoEnv):
         self.render_interval = render_interval
         self._steps_since_reset = 0
         self._images: dict[str, np.ndarray] | None = None
+        self._render_key: str | None = None  # render_assets_key of the current model (robosuite rebuilds it)
         self.observation_space.spaces[IMAGE_FRESH] = spaces.Box(0, 1, shape=(1,), dtype=np.uint8)
         self.faults: list[dict] = []  # one record per faulted episode
         self.nonfinite_actions = 0  # actions received with a NaN or infinite component
@@ -52,25 +142,26 @@ class SparseRenderLiberoEnv(LiberoEnv):
         if self._env is not None:
             return
         # Cameras are not robosuite observables here: rendering them at every physics step is what we avoid.
-        self._env = OffScreenRenderEnv(
+        # No robosuite renderer either (LIBERO's OffScreenRenderEnv forces one): `RENDERER` draws the cameras.
+        self._env = ControlEnv(
             bddl_file_name=self._task_bddl_file,
             camera_heights=self.observation_height,
             camera_widths=self.observation_width,
             control_freq=self.control_freq,
             hard_reset=self.hard_reset,
             use_camera_obs=False,
+            has_offscreen_renderer=False,
         )
         self._env.reset()
 
     def _render_cameras(self) -> dict[str, np.ndarray]:
         inner = self._env.env
+        if self._render_key is None:  # first render since the last reset, which may have reloaded the model
+            self._render_key = render_assets_key(inner.sim.model._model)
         flip = -1 if macros.IMAGE_CONVENTION == "opencv" else 1  # as robosuite's camera sensor
         return {
-            camera: inner.sim.render(
-                camera_name=camera.removesuffix("_image"),
-                width=self.observation_width,
-                height=self.observation_height,
-                depth=False,
+            camera: RENDERER.render(
+                inner, self._render_key, camera.removesuffix("_image"), self.observation_width, self.observation_height
             )[::flip]
             for camera in self.camera_name
         }
@@ -97,7 +188,7 @@ class SparseRenderLiberoEnv(LiberoEnv):
     def reset(self, seed=None, options=None, **kwargs):
         self._counted = bool((options or {}).get(NEW_ROLLOUT_OPTION))
         self._rollouts += self._counted
-        self._steps_since_reset, self._images = 0, None
+        self._steps_since_reset, self._images, self._render_key = 0, None, None
         try:
             observation, info = super().reset(seed=seed, **kwargs)
         except Exception as err:  # noqa: BLE001  (a simulator left broken by a fault: rebuild it once)
