@@ -3,8 +3,8 @@
 Runs `benchmarks/bench_core.py` from the repository checkout (editable install): prints a table of medians
 and ratios, and as its last line one JSON object with every figure. `eval_peak_rss_gb` is the peak RSS (GB, 1e9
 bytes) of one `lerobot-eval` of the shipped libero_object checkpoint at `--eval.batch_size=10`, 20-step episodes of
-task 0, sync environments (`benchmarks/bench_eval_memory.py`; ~2 min on idle cores, 8 on loaded ones); null, with the reason in `eval_peak_rss`,
-where the simulator is not installed.
+task 0, sync environments (`benchmarks/bench_eval_memory.py`; 8 min on heavily loaded cores, less on idle ones);
+null, with the reason in `eval_peak_rss`, where the simulator is not installed.
 """
 
 import argparse
