@@ -37,7 +37,9 @@ def run(checkpoint: Path, frames: list[dict], task: str, warmup: int, **override
     """Tick times (s) after `warmup` ticks and error regression's iteration counts, one fresh episode."""
     config = PredVLAConfig.from_pretrained(checkpoint, cli_overrides=[f"--{k}={v}" for k, v in overrides.items()])
     policy = PredVLAPolicy.from_pretrained(checkpoint, config=config).eval()
-    pre, post = make_pre_post_processors(config, pretrained_path=str(checkpoint))
+    device = torch.device(config.device)  # the best available: shipped configs leave the device unset
+    pre, post = make_pre_post_processors(config, pretrained_path=str(checkpoint),
+                                         preprocessor_overrides={"device_processor": {"device": config.device}})
     for step in pre.steps:
         if isinstance(step, FrontendProcessorStep):
             step.refresh_interval = config.visual_refresh_interval  # as saved by checkpoints written from now on
@@ -47,7 +49,7 @@ def run(checkpoint: Path, frames: list[dict], task: str, warmup: int, **override
     for i, frame in enumerate(frames):
         start = time.perf_counter()
         with torch.inference_mode():
-            observation = prepare_observation_for_inference(dict(frame), torch.device("cpu"), task, "bench")
+            observation = prepare_observation_for_inference(dict(frame), device, task, "bench")
             batch = pre(observation)
             er_start = time.perf_counter()
             action = policy.select_action(batch)
