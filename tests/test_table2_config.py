@@ -72,3 +72,30 @@ def test_the_sweep_plans_the_papers_protocol(tmp_path, capsys):
     assert evals and all("--env.episode_length=600" in line for line in evals)
     assert any("--eval.n_episodes=50" in line and "--policy.er_iterations=0" in line for line in evals)
     assert any("--env.init_states=false" in line and "--seed=3000" in line for line in evals)
+
+
+def test_the_baselines_choose_their_rate_on_heldout_demonstrations_and_are_evaluated_as_predvla(tmp_path, capsys):
+    """B1 and B2: four 10,000-step candidates each with 5 demonstrations per task held out, then 50,000 steps at
+    batch 32 at the chosen rate on all 500, evaluated exactly as predvla_table2."""
+    assert predvla_main(["sweep", str(SWEEP), "--runs-dir", str(tmp_path / "runs"), "--dry-run"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+
+    def arg(line: str, name: str) -> str | None:
+        return next((a.split("=", 1)[1] for a in line.split() if a.startswith(f"--{name}=")), None)
+
+    for name, policy in (("B1", "predvla_bc_transformer"), ("B2", "predvla_bc_rnn")):
+        trainings = [line for line in lines if "lerobot-train" in line and f"--policy.type={policy}" in line]
+        candidates, full = trainings[:-1], trainings[-1]
+        assert [arg(c, "policy.optimizer_lr") for c in candidates] == ["0.0001", "0.0003", "0.001", "0.003"]
+        assert all(arg(c, "steps") == "10000" and arg(c, "dataset.eval_split") == "0.1" for c in candidates)
+        assert arg(full, "steps") == "50000" and arg(full, "dataset.eval_split") is None
+        assert arg(full, "batch_size") == "16" and "--nproc_per_node=2" in full  # 2 x 16 = 32
+        assert "lr_sweep" in full  # the rate is the selection's, unknown before it runs
+        ours, theirs = ([line for line in lines if "lerobot-eval" in line and f"/train/{n}/" in line]
+                        for n in (name, "predvla_table2"))
+        assert len(ours) == 10  # one part per task
+
+        def protocol(line: str) -> list[str]:
+            return [a for a in line.split() if not a.startswith(("--policy.path=", "--output_dir="))]
+
+        assert sorted(map(protocol, ours)) == sorted(map(protocol, theirs[:10]))  # seed 0 of predvla_table2

@@ -52,6 +52,8 @@ def apply_flags(sweep: Sweep, args: argparse.Namespace) -> None:
             spec.suites = [x for x in (spec.suites or args.suites) if x in args.suites] or None
         if args.steps is not None:
             spec.steps = None
+            if spec.lr_sweep is not None:  # the candidates shrink with the runs (their held-out loss at the end)
+                spec.lr_sweep.steps, spec.lr_sweep.eval_every = args.steps, None
         if args.n_episodes is not None:
             spec.n_episodes = None
     s.seeds = args.seeds if args.seeds is not None else s.seeds

@@ -6,23 +6,39 @@ killed midway resumes from its last checkpoint (`lerobot-train --resume=true`), 
 redone. Inference-time variants (`checkpoint_from: <config>`) evaluate another configuration's checkpoints
 with extra `lerobot-eval` arguments and train nothing themselves.
 
+A configuration with `lr_sweep` first chooses its learning rate on held-out demonstrations (`lr_selection.py`):
+one shorter candidate training per rate, then its own training at the chosen rate.
+
 Scaling out: `--shard i/n` runs every n-th training unit (a checkpoint with all evaluations that use it), so n
 processes or hosts sharing RUNS_DIR split a sweep without overlap; `accelerate_processes > 1` trains each run
 with `accelerate launch --multi_gpu` (LeRobot's multi-GPU path).
 """
 
 import json
+import math
 import os
 import shutil
 import subprocess
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
+from lerobot_predvla.experiments.lr_selection import (
+    CRITERION,
+    PENDING_LR,
+    LRSweep,
+    candidate_name,
+    candidate_path,
+    choose,
+    divergence,
+    heldout_episodes,
+    heldout_losses,
+    selection_path,
+)
 from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
 from lerobot_predvla.utils.checkpoints import last_pretrained
@@ -96,6 +112,8 @@ class ConfigSpec:
         eval_seed: `lerobot-eval --seed` (default: the run's training seed). With `init_states: false` it picks the
             resets, so a checkpoint can be evaluated on resets no training or earlier evaluation saw.
         suites, seeds, steps, n_episodes: Per-configuration replacements of the sweep-wide values.
+        lr_sweep: Choose `optimizer_lr` before training (`LRSweep`'s fields: `{rates: [1e-4, 3e-4, 1e-3, 3e-3],
+            steps: 10000, eval_split: 0.1}`): one candidate per rate, the one with the lowest held-out loss wins.
     """
 
     name: str
@@ -117,6 +135,11 @@ class ConfigSpec:
     seeds: list[int] | None = None
     steps: int | None = None
     n_episodes: int | None = None
+    lr_sweep: LRSweep | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.lr_sweep, dict):  # as read from a sweep file
+            self.lr_sweep = LRSweep(**self.lr_sweep)
 
     def policy_args(self, base_dir: Path, suite: str) -> list[str]:
         if self.policy.endswith(".json"):
@@ -289,6 +312,8 @@ class Sweep:
                 raise SweepError(f"{where}: configuration {spec.name}: checkpoint_from must name a trained config.")
             if spec.corruption is not None:
                 self.validate_corruption(spec, where)
+            if spec.lr_sweep is not None:
+                self.validate_lr_sweep(spec, where)
             unknown = set(self.suites_of(spec)) - set(SUITES)
             if unknown:
                 raise SweepError(f"{where}: configuration {spec.name}: unknown suites {sorted(unknown)}; use {SUITES}.")
@@ -298,6 +323,20 @@ class Sweep:
         for suite in self.settings.data:
             if not self.settings.datasets.get(suite, {}).get("root"):
                 raise SweepError(f"{where}: `data` makes {suite}'s dataset, so `datasets.{suite}` needs a `root`.")
+
+    def validate_lr_sweep(self, spec: ConfigSpec, where: Path) -> None:
+        problems = spec.lr_sweep.problems()
+        if spec.checkpoint_from:
+            problems.append("a configuration that trains nothing has no learning rate to choose (checkpoint_from)")
+        overridden = ["policy_overrides"] if "optimizer_lr" in spec.policy_overrides else []
+        overridden += [f"suite_overrides.{s}" for s, o in spec.suite_overrides.items() if "optimizer_lr" in o]
+        if overridden:
+            problems.append(f"optimizer_lr is chosen by the sweep; remove it from {', '.join(overridden)}")
+        taken = [name for name in (candidate_name(spec.name, r) for r in spec.lr_sweep.rates) if name in self.configs]
+        if taken:
+            problems.append(f"the candidate run names {taken} are configuration names")
+        if problems:
+            raise SweepError(f"{where}: configuration {spec.name}: lr_sweep: {'; '.join(problems)}.")
 
     def validate_corruption(self, spec: ConfigSpec, where: Path) -> None:
         c = spec.corruption
@@ -429,6 +468,7 @@ class Runner:
 
     def train_command(self, spec: ConfigSpec, suite: str, seed: int) -> list[str]:
         s = self.sweep.settings
+        spec = self.at_selected_lr(spec, suite)
         dataset = s.datasets[suite]
         procs = s.accelerate_processes
         if s.batch_size % procs:
@@ -581,7 +621,7 @@ class Runner:
 
     def pending_commands(self, configs: list[str] | None, shard: tuple[int, int]) -> list[list[str]]:
         """The commands `run` would start now (for --dry-run); a resumed training shows its resume command."""
-        commands, data_done = [], set()
+        commands, data_done, selected = [], set(), set()
         for (trained, suite, seed), unit_runs in self.shard_units(configs, shard):
             pending = [r for r in unit_runs if not self.record_path(r).is_file()]
             if not pending:
@@ -592,14 +632,31 @@ class Runner:
                 data_done.add(suite)
             if (out / TRAIN_DONE_FILE).is_file():
                 checkpoint = self.trained_checkpoint(json.loads((out / TRAIN_DONE_FILE).read_text()))
-            elif (last_pretrained(out) / "train_config.json").is_file():
-                commands.append(self.resume_command(out))
-                checkpoint = last_pretrained(out)
             else:
-                commands.append(self.train_command(self.sweep.configs[trained], suite, seed))
+                if (trained, suite) not in selected:  # one selection serves every seed
+                    commands += self.pending_lr_commands(self.sweep.configs[trained], suite)
+                    selected.add((trained, suite))
+                commands.append(self.pending_train_command(self.sweep.configs[trained], suite, seed))
                 checkpoint = last_pretrained(out)
             commands += [command for run in pending for command in self.pending_eval_commands(run, checkpoint)]
         return commands
+
+    def pending_train_command(self, spec: ConfigSpec, suite: str, seed: int) -> list[str]:
+        """A training's resume command when it has a checkpoint, else its command from the start."""
+        out = self.train_dir(spec.name, suite, seed)
+        if (last_pretrained(out) / "train_config.json").is_file():
+            return self.resume_command(out)
+        return self.train_command(spec, suite, seed)
+
+    def pending_lr_commands(self, spec: ConfigSpec, suite: str) -> list[list[str]]:
+        """The candidate trainings a learning-rate selection still needs (none once it has chosen)."""
+        sweep = spec.lr_sweep
+        if sweep is None or selection_path(self.runs_dir, spec.name, suite).is_file():
+            return []
+        candidates = [self.candidate_spec(spec, rate) for rate in sweep.rates
+                      if not candidate_path(self.runs_dir, spec.name, suite, rate).is_file()]
+        return [self.pending_train_command(c, suite, sweep.seed) for c in candidates
+                if not (self.train_dir(c.name, suite, sweep.seed) / TRAIN_DONE_FILE).is_file()]
 
     def run(
         self, configs: list[str] | None = None, shard: tuple[int, int] = (0, 1), progress: bool = True
@@ -640,6 +697,8 @@ class Runner:
             return json.loads(done.read_text())
         if not self.make_data(suite):  # the dataset is needed only to train: evaluations never read it
             return None
+        if spec.lr_sweep is not None and self.select_lr(spec, suite) is None:
+            return None
         last = last_pretrained(out)
         if (last / "train_config.json").is_file():
             command, resumed = self.resume_command(out), True
@@ -662,6 +721,85 @@ class Runner:
         }
         atomic_write_json(done, result)
         return result
+
+    # ----- learning-rate selection ---------------------------------------------------------------------------
+    def candidate_spec(self, spec: ConfigSpec, rate: float) -> ConfigSpec:
+        """The candidate training of `spec` at `rate`: its sweep's steps, episodes held out, nothing to select."""
+        sweep = spec.lr_sweep
+        return replace(spec, name=candidate_name(spec.name, rate), steps=sweep.steps, lr_sweep=None,
+                       policy_overrides={**spec.policy_overrides, "optimizer_lr": float(rate)},
+                       train_args=[*spec.train_args, *sweep.train_args()])
+
+    def at_selected_lr(self, spec: ConfigSpec, suite: str) -> ConfigSpec:
+        """`spec` with its chosen learning rate (a placeholder before the selection, for dry runs)."""
+        if spec.lr_sweep is None:
+            return spec
+        path = selection_path(self.runs_dir, spec.name, suite)
+        rate = json.loads(path.read_text())["chosen_lr"] if path.is_file() else PENDING_LR
+        return replace(spec, policy_overrides={**spec.policy_overrides, "optimizer_lr": rate})
+
+    def lr_candidate(self, spec: ConfigSpec, suite: str, rate: float) -> dict | None:
+        """Train (or reuse) one candidate and read its held-out loss; None when its training failed other than by
+        diverging (a re-run retries it)."""
+        path = candidate_path(self.runs_dir, spec.name, suite, rate)
+        if path.is_file():
+            return json.loads(path.read_text())
+        sweep, candidate = spec.lr_sweep, self.candidate_spec(spec, rate)
+        log = self.log_path(candidate.name, suite, sweep.seed, "train")
+        trained = self.train(candidate, suite, sweep.seed)
+        if trained is None:
+            diverged = divergence(log)
+            if diverged is None:
+                return None
+            result = {"lr": float(rate), "heldout_nll": None, "diverged": diverged}
+        else:
+            curve = heldout_losses(log)
+            if sweep.steps not in curve:
+                raise SweepError(f"{log}: no held-out loss at step {sweep.steps} (`step {sweep.steps}: eval_loss=`); "
+                                 f"delete {self.train_dir(candidate.name, suite, sweep.seed)} to train the "
+                                 "candidate again.")
+            final = curve[sweep.steps]
+            result = {"lr": float(rate), "heldout_nll": final if math.isfinite(final) else None,
+                      "heldout_curve": {str(step): loss for step, loss in sorted(curve.items())},
+                      "steps": trained["steps"], "train_wall_s": trained["train_wall_s"],
+                      "checkpoint": trained["checkpoint"], "command": trained["command"]}
+        atomic_write_json(path, result)
+        return result
+
+    def select_lr(self, spec: ConfigSpec, suite: str) -> float | None:
+        """The learning rate of `spec` on `suite` chosen on held-out demonstrations (`lr_selection.py`), selecting
+        it first if needed; None when a candidate's training failed."""
+        path = selection_path(self.runs_dir, spec.name, suite)
+        if path.is_file():
+            return json.loads(path.read_text())["chosen_lr"]
+        sweep = spec.lr_sweep
+        candidates = {}
+        for rate in sweep.rates:
+            result = self.lr_candidate(spec, suite, rate)
+            if result is None:
+                return None
+            candidates[float(rate)] = result
+        try:
+            chosen = choose({rate: result["heldout_nll"] for rate, result in candidates.items()})
+        except ValueError as err:
+            raise SweepError(f"configuration {spec.name} on {suite}: {err}") from err
+        dataset = self.sweep.settings.datasets[suite]
+        atomic_write_json(path, {
+            "config": spec.name,
+            "suite": suite,
+            "criterion": CRITERION,
+            "rates": [float(r) for r in sweep.rates],
+            "steps": sweep.steps,
+            "eval_split": sweep.eval_split,
+            "seed": sweep.seed,
+            "heldout_episodes": heldout_episodes(dataset["repo_id"], self._path(dataset["root"]), sweep.eval_split),
+            "heldout_nll": {f"{rate:g}": result["heldout_nll"] for rate, result in candidates.items()},
+            "chosen_lr": chosen,
+            "finished": datetime.now(UTC).isoformat(timespec="seconds"),
+        })
+        print(f"predvla sweep: {spec.name} on {suite}: optimizer_lr {chosen:g} chosen on held-out demonstrations; "
+              f"see {path}", file=sys.stderr)
+        return chosen
 
     def eval_parts(self, run: Run) -> list[tuple[Path, list[str]]]:
         """(output directory, extra lerobot-eval arguments) of each part of a run's evaluation: the whole suite

@@ -18,6 +18,10 @@ from collections.abc import Callable
 import torch
 from torch import Tensor, nn
 
+# The stop message's fixed part: `predvla sweep` finds it in a training log to tell a diverged learning rate from
+# a crash (experiments/lr_selection.py).
+NONFINITE_STOP = "stopped before any weight, posterior or checkpoint became non-finite"
+
 
 class NonFiniteTrainingError(SystemExit):
     """Stops training with one line (a `SystemExit`, so `lerobot-train` prints the message, no traceback)."""
@@ -75,8 +79,7 @@ class TrainingGuard:
         line = f"{self.name}: {what} at training step {self.step} (loss terms: {terms})"
         if self.mode == "stop":
             raise NonFiniteTrainingError(
-                f"{line}; stopped before any weight, posterior or checkpoint became non-finite "
-                "(--policy.on_nonfinite_training=skip skips such batches)."
+                f"{line}; {NONFINITE_STOP} (--policy.on_nonfinite_training=skip skips such batches)."
             )
         self.skipped += 1
         logging.warning("%s; batch skipped (%d so far).", line, self.skipped)
