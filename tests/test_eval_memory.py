@@ -1,0 +1,76 @@
+"""Evaluation memory: `predvla_libero` sub-environments render through one shared GL/MuJoCo render context.
+
+robosuite's own renderer gives every environment a GL context and a render context (textures, meshes, shadow map
+and framebuffers, all in process memory on a CPU) and rebuilds them at every hard reset; docs/speed.md
+("Evaluation memory") measures what that cost. These tests check that no sub-environment holds one, that the
+shared context draws the same pixels as robosuite's, and that a further environment costs far less memory.
+"""
+
+import gc
+
+import numpy as np
+import pytest
+
+from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+
+pytestmark = pytest.mark.simulator
+
+SUITE = "libero_object"
+CAMERAS = ("agentview", "robot0_eye_in_hand")
+
+
+def rss_gb() -> float:
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) for line in status if line.startswith("VmRSS:")) * 1024 / 1e9
+
+
+def test_sub_environments_share_one_render_context_with_robosuites_pixels():
+    from libero.libero.envs import OffScreenRenderEnv
+    from robosuite import macros
+
+    from lerobot_predvla.envs import predvla_libero
+    from lerobot_predvla.envs.configs import PredVLALiberoEnv
+
+    cfg = PredVLALiberoEnv(task=SUITE, task_ids=[0])
+    venv = cfg.create_envs(n_envs=2)[SUITE][0]
+    built = predvla_libero.RENDERER.contexts_built
+    obs, _info = venv.reset(seed=[0, 1])
+    obs, _info = venv.reset(seed=[0, 1])  # a second hard reset: new models, same rendering assets
+    assert predvla_libero.RENDERER.contexts_built - built <= 1  # at most one: none if a previous test left it
+    for sub_env in venv.envs:
+        assert sub_env._env.env.sim._render_context_offscreen is None  # no robosuite renderer per environment
+    # robosuite's own renderer (LIBERO's OffScreenRenderEnv, its context made current) on the same states.
+    reference = OffScreenRenderEnv(bddl_file_name=venv.envs[0]._task_bddl_file, camera_heights=128,
+                                   camera_widths=128, use_camera_obs=False)
+    reference.reset()
+    flip = -1 if macros.IMAGE_CONVENTION == "opencv" else 1
+    for i, sub_env in enumerate(venv.envs):
+        reference.set_init_state(sub_env._env.get_sim_state())
+        sim = reference.env.sim
+        for camera, key in zip(CAMERAS, ("image", "image2"), strict=True):
+            sim._render_context_offscreen.gl_ctx.make_current()
+            expected = sim.render(camera_name=camera, width=128, height=128)[::flip]
+            assert expected.std() > 0  # a real scene, not a blank buffer
+            np.testing.assert_array_equal(obs["pixels"][key][i], expected)
+    reference.close()
+    venv.close()
+
+
+def test_a_further_environment_costs_a_fraction_of_robosuites_renderer():
+    """The per-environment cost: resident memory with one reset environment, then with two more beside it.
+
+    With a robosuite renderer per environment each one added ~0.75 GB; without, 0.31 GB, of which its MuJoCo
+    model is 0.25 GB (docs/speed.md, "Evaluation memory")."""
+    from lerobot_predvla.envs.configs import PredVLALiberoEnv
+
+    cfg = PredVLALiberoEnv(task=SUITE, task_ids=[0])
+    venvs, resident = [], []
+    for n_envs in (1, 2):  # one environment, then two more beside it
+        venvs.append(cfg.create_envs(n_envs=n_envs)[SUITE][0])
+        venvs[-1].reset(seed=list(range(n_envs)))
+        venvs[-1].step(np.zeros((n_envs, 7), dtype=np.float32))
+        gc.collect()
+        resident.append(rss_gb())
+    for venv in venvs:
+        venv.close()
+    assert (resident[1] - resident[0]) / 2 < 0.4, resident
