@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_predvla.libero.install import config_file
+from lerobot_predvla.libero.config_path import active_config
 from lerobot_predvla.libero.protocol import SUITES
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -25,12 +25,12 @@ INSTALL_HINT = "LIBERO is not installed in this venv: run `make libero`"
 
 def check_libero_config() -> None:
     """Fail with the install hint (never prompting) unless LIBERO's config points at existing files."""
-    config = config_file()
+    config = active_config()
     if not config.is_file():
         raise RuntimeError(f"{config} missing ({INSTALL_HINT})")
     import yaml
 
-    # The config is per user, not per venv: another checkout's install may have pointed it at its own venv.
+    # ~/.libero is per user: another checkout's install may have pointed it at its own venv (config_path.py).
     bddl = Path(yaml.safe_load(config.read_text()).get("bddl_files", ""))
     if not bddl.is_dir():
         raise RuntimeError(f"{config}: `bddl_files` is {bddl}, which does not exist (a stale config from another "

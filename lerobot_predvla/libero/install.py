@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+from lerobot_predvla.libero.config_path import CONFIG_NAME, VENV_CONFIG_DIR, active_config
 from lerobot_predvla.utils.versions import NOT_INSTALLED, package_version
 
 LEROBOT_VERSION = "0.6.1"  # the pin of pyproject.toml, which pip must not change
@@ -91,13 +92,16 @@ def link_assets() -> Path:
     return target
 
 
-def config_file() -> Path:
-    """LIBERO's config, `$LIBERO_CONFIG_PATH/config.yaml` (default `~/.libero`), where hf-libero reads it."""
-    return Path(os.environ.get("LIBERO_CONFIG_PATH", Path.home() / ".libero")) / "config.yaml"
+def config_files() -> list[Path]:
+    """Where LIBERO's config is written: inside this virtual environment (what the plugin points
+    LIBERO_CONFIG_PATH at, `config_path.py`), `~/.libero` (hf-libero's default, for processes that never import the
+    plugin) and `$LIBERO_CONFIG_PATH` when it names another folder."""
+    return list(dict.fromkeys([VENV_CONFIG_DIR / CONFIG_NAME, Path.home() / ".libero" / CONFIG_NAME, active_config()]))
 
 
 def write_config() -> Path:
-    """Write `$LIBERO_CONFIG_PATH/config.yaml` so `import libero.libero` never calls input()."""
+    """Write LIBERO's config (`config_files()`) so `import libero.libero` never calls input(); returns the one
+    inside this virtual environment."""
     root = _package_dir("libero") / "libero"
     paths = {
         "benchmark_root": root,
@@ -109,14 +113,14 @@ def write_config() -> Path:
     import yaml  # a LeRobot dependency, present once pip_install() ran
 
     text = yaml.safe_dump({k: str(v) for k, v in paths.items()})
-    config = config_file()
-    if config.is_file() and config.read_text() == text:
-        log(f"config: {config} up to date")
-        return config
-    config.parent.mkdir(parents=True, exist_ok=True)
-    config.write_text(text)
-    log(f"config: wrote {config}")
-    return config
+    for config in config_files():
+        if config.is_file() and config.read_text() == text:
+            log(f"config: {config} up to date")
+            continue
+        config.parent.mkdir(parents=True, exist_ok=True)
+        config.write_text(text)
+        log(f"config: wrote {config}")
+    return VENV_CONFIG_DIR / CONFIG_NAME
 
 
 def check_import() -> None:
