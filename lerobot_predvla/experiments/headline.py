@@ -61,7 +61,7 @@ class Experiment:
 EXPERIMENTS = (
     Experiment("libero_object_table2", "configs/sweeps/libero_object_table2.yaml", "Table 2",
                ("predvla_table2", "predvla_table2_seeds"),
-               ("predvla_table2_open_loop", "predvla_table2_seeds_open_loop")),
+               ("predvla_table2_open_loop", "predvla_table2_seeds_open_loop"), ("B2",), ("B1",)),
     Experiment("libero_object_cpu", "configs/sweeps/libero_object_cpu.yaml", "CPU recipe",
                ("predvla_cpu_8k",), ("predvla_cpu_8k_open_loop",), ("B2",), ("B1",)),
     Experiment("libero_object_cpu_init_noise", "configs/sweeps/libero_object_cpu_init_noise.yaml", "CPU recipe",
