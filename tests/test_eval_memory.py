@@ -74,3 +74,25 @@ def test_a_further_environment_costs_a_fraction_of_robosuites_renderer():
     for venv in venvs:
         venv.close()
     assert (resident[1] - resident[0]) / 2 < 0.4, resident
+
+
+def test_the_shared_render_context_is_freed_before_exit_without_a_traceback():
+    """robosuite terminates the EGL display at exit; the shared contexts are freed before it, so a process that
+    rendered ends without robosuite's "Exception ignored in ... __del__" traceback."""
+    import subprocess
+    import sys
+
+    # The first atexit handler runs last: it drops the renderer after every other one ran, as a test runner's
+    # teardown does (a plain script may never collect module globals at exit).
+    code = ("import atexit, gc, sys\n"
+            "atexit.register(lambda: (setattr(sys.modules['lerobot_predvla.envs.predvla_libero'], 'RENDERER', None),"
+            " gc.collect()))\n"
+            "from lerobot_predvla.libero import env as _e\n"
+            "from lerobot_predvla.envs import predvla_libero\n"
+            "from lerobot_predvla.envs.configs import PredVLALiberoEnv\n"
+            "venv = PredVLALiberoEnv(task='libero_object', task_ids=[0]).create_envs(n_envs=1)['libero_object'][0]\n"
+            "venv.reset(seed=[0])\n"
+            "assert predvla_libero.RENDERER.contexts_built >= 1\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "Exception ignored" not in out.stderr and "EGLError" not in out.stderr, out.stderr[-2000:]

@@ -11,6 +11,7 @@ unstable-simulation warning or a non-finite action) ends that episode as a failu
 other sub-environments and the run go on. Faults are kept in `faults` and listed in `eval_info.json`.
 """
 
+import atexit
 import logging
 import threading
 import zlib
@@ -80,6 +81,9 @@ class SharedRenderer:
     def _bind(self, model: mujoco.MjModel, key: str, width: int, height: int) -> None:
         if self._gl is None:  # robosuite's context class for MUJOCO_GL (it ignores the size arguments)
             self._gl = GLContext(max_width=width, max_height=height, device_id=-1)
+            # robosuite registers the display's termination with the first context; atexit runs last-first, so
+            # this frees the contexts before it (else robosuite's __del__ prints a traceback at exit).
+            atexit.register(self.close)
         self._gl.make_current()
         if key == self._key and width <= self._context.offWidth and height <= self._context.offHeight:
             return
@@ -110,6 +114,16 @@ class SharedRenderer:
             image = np.empty((height, width, 3), dtype=np.uint8)
             mujoco.mjr_readPixels(image, None, viewport, self._context)
         return image
+
+    def close(self) -> None:
+        """Free the render context and the GL context (at exit, or to start again)."""
+        with self._lock:
+            if self._gl is not None:
+                self._gl.make_current()
+                if self._context is not None:
+                    self._context.free()
+                self._gl.free()
+            self._gl, self._context, self._scene, self._key = None, None, None, None
 
 
 RENDERER = SharedRenderer()
