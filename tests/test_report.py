@@ -233,3 +233,20 @@ def test_starts_and_mechanism_sections_read_the_files_beside_the_report(runs, tm
     assert "| objects, std of x, y over starts (mm) | 3.00 | 1.50 |" in text
     assert "## The mechanism over training" in text and "### seed0" in text
     assert "| 10,000 | 30 | 0.027 / 0.103 | 29 / 9 | 0.100 / 0.200 / 0.300 / 0.400 |" in text
+
+
+def test_baselines_learning_rates_from_the_sweeps_selection(runs, tmp_path):
+    """RUNS_DIR/lr_sweep/<config>/<suite>.json becomes a table: each rate's held-out NLL, the chosen one."""
+    import shutil
+
+    runs_copy = tmp_path / "runs"
+    shutil.copytree(runs, runs_copy)
+    selection = {"config": "B2", "suite": "libero_object",
+                 "heldout_nll": {"0.0001": -3.25, "0.001": -4.5, "0.003": None}, "chosen_lr": 0.001,
+                 "steps": 10000, "heldout_episodes": {"0": [45, 46], "1": [95]}}
+    (runs_copy / "lr_sweep" / "B2").mkdir(parents=True)
+    (runs_copy / "lr_sweep" / "B2" / "libero_object.json").write_text(json.dumps(selection))
+    write_report(runs_copy, tmp_path / "report")
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## Baselines' learning rates" in text
+    assert "| B2 | object | -3.250 | -4.500 | — | 0.001 | 10,000 | 3 |" in text

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
+from lerobot_predvla.experiments.lr_selection import LR_SWEEP_DIR
 from lerobot_predvla.experiments.sweep import eval_run_dir
 from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
@@ -722,6 +723,26 @@ def mechanism_section(out: Path) -> list[str]:
     return lines
 
 
+def lr_selection_section(runs_dir: Path) -> list[str]:
+    """The baselines' learning rates, chosen on held-out demonstrations (`RUNS_DIR/lr_sweep/<config>/<suite>.json`
+    of `predvla sweep`)."""
+    found = sorted((Path(runs_dir) / LR_SWEEP_DIR).glob("*/*.json"))
+    if not found:
+        return []
+    selections = [json.loads(path.read_text()) for path in found]
+    rates = sorted({rate for sel in selections for rate in sel["heldout_nll"]}, key=float)
+    rows = [[sel["config"], SUITE_LABELS.get(sel["suite"], sel["suite"]),
+             *[MISSING if sel["heldout_nll"].get(r) is None else f"{sel['heldout_nll'][r]:.3f}" for r in rates],
+             f"{sel['chosen_lr']:g}", f"{sel['steps']:,}",
+             str(sum(len(v) for v in sel["heldout_episodes"].values()))] for sel in selections]
+    return ["", "## Baselines' learning rates", "",
+            "Each baseline's learning rate is the one of lowest action NLL on held-out demonstrations (LeRobot's "
+            "`--dataset.eval_split`), never on the evaluation's init states; the candidates train on the other "
+            f"demonstrations ({MISSING}: diverged).", "",
+            _table(["config", "suite", *[f"NLL at lr {r}" for r in rates], "chosen", "candidate steps",
+                    "held-out demonstrations"], rows)]
+
+
 def write_report(runs_dir: Path, out: Path) -> dict:
     """Build tables, figures, `report.md` and `report.json` in `out`; returns the summary."""
     import matplotlib
@@ -778,7 +799,7 @@ def write_report(runs_dir: Path, out: Path) -> dict:
             sections += ["", table]
         if has_figure:
             sections += ["", f"![{title}]({FIGURES[figure]})"]
-    sections += starts_section(out / START_SPREAD_FILE) + mechanism_section(out)
+    sections += starts_section(out / START_SPREAD_FILE) + mechanism_section(out) + lr_selection_section(runs_dir)
     stages = stages_section(records, runs_dir)
     if stages:
         sections += ["", "## Stages: wall time and commands", "", *stages]
