@@ -11,7 +11,7 @@ from lerobot_predvla.policies.ladder.configuration_predvla_ladder import (
     LADDER_WIDTHS,
     PredVLALadderConfig,
 )
-from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean
+from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean, refresh_mask
 from lerobot_predvla.policies.predvla.predictive_model import GMMActionHead, PredictiveModel, RecurrentState, mlp
 
 
@@ -149,7 +149,7 @@ class PredVLALadderPolicy(ObservationPolicy):
             model.initial_state(valid.shape[1]), model.language_term(seq["language"]), None,
             extra_ab=self._extra_ab(seq["vision"]), steps=steps,
         )
-        fresh = valid & (torch.arange(steps, device=valid.device)[:, None] % cfg.visual_refresh_interval == 0)
+        fresh = refresh_mask(valid, cfg.visual_refresh_interval)
         eps_v, eps_q = model.prediction_errors(traj, seq["vision"], seq["state"])
         terms = {
             "vision_error": masked_mean(eps_v, fresh),

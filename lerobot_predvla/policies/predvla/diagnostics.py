@@ -32,7 +32,7 @@ from lerobot_predvla.utils.io import atomic_write_json
 
 from .configuration_predvla import MODULE_NAMES
 from .error_regression import ErrorRegression
-from .modeling_predvla import PredVLAPolicy, term_weights, training_terms
+from .modeling_predvla import PredVLAPolicy, refresh_mask, term_weights, training_terms
 from .posterior_store import POSTERIOR_STORE_FILE
 from .sequence_table import EpisodeSequences, read_columns
 
@@ -175,7 +175,7 @@ def proprio_report(policy: PredVLAPolicy, data: TaskData, store: Tensor | None) 
     model, seq = policy.model, data.sequences
     batch = seq.batch(torch.arange(seq.state.shape[0]), torch.device("cpu"))
     valid, state = batch["valid"], batch["state"]  # (L, E), (L, E, P)
-    fresh = valid & (torch.arange(valid.shape[0])[:, None] % policy.config.visual_refresh_interval == 0)
+    fresh = refresh_mask(valid, policy.config.visual_refresh_interval)
     lang_term = model.language_term(batch["language"])
     trajectories = {"open_loop": model.rollout(model.initial_state(valid.shape[1]), lang_term, steps=valid.shape[0])}
     if store is not None:
