@@ -336,8 +336,9 @@ def forces_report(policy: PredVLAPolicy, data: TaskData, store: Tensor, weight_d
     clip_scale = min(1.0, grad_clip_norm / (total_norm + 1e-6)) if grad_clip_norm > 0 else 1.0
     weights = {}
     for i, (name, p) in enumerate(params.items()):
-        decay = weight_decay * float(p.detach().norm())
-        row = {"norm": float(p.detach().norm()),
+        norm = float(p.detach().norm())
+        decay = weight_decay * norm
+        row = {"norm": norm,
                "term_grad_norm": {k: float(grads[k][i].norm()) for k in grads},
                "decay_over_loss": decay / max(clip_scale * float(total[i].norm()), 1e-12)}
         if momentum is not None and name in momentum:
