@@ -31,20 +31,31 @@ EVAL_BATCH, EVAL_STEPS = 10, 20  # `eval_peak_rss_gb` of `predvla bench --quick`
 GB = 1e9
 
 
+# Runs argv[2:] and writes its peak RSS (KiB) to argv[1]. A process started by fork keeps the peak of the memory it
+# shared with its parent until exec (the kernel carries the pre-exec high-water mark into `ru_maxrss`), so a large
+# caller, such as `predvla bench` after its other workloads, would report its own size: this small fresh interpreter
+# starts the measured command instead, and only its own small size carries over.
+_LAUNCHER = ("import os, subprocess, sys\n"
+             "process = subprocess.Popen(sys.argv[2:])\n"
+             "_, status, usage = os.wait4(process.pid, 0)\n"
+             "open(sys.argv[1], 'w').write(str(usage.ru_maxrss))\n"
+             "sys.exit(os.waitstatus_to_exitcode(status))\n")
+
+
 def peak_rss_gb(command: list[str], log: Path) -> float:
     """Run `command` to completion (output to `log`) and return its peak resident set in GB.
 
-    `wait4` reports the child's `ru_maxrss` (its VmHWM, or that of a descendant it waited for if larger): the
-    exact peak, with no sampling interval to miss it."""
+    `wait4` reports the command's `ru_maxrss` (its VmHWM, or that of a descendant it waited for if larger): the
+    exact peak, with no sampling interval to miss it. A small launcher process starts it (see `_LAUNCHER`)."""
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "HF_HUB_OFFLINE": "1"}
+    peak_file = log.with_suffix(".maxrss")
     with log.open("w") as out:
-        process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, env=env, cwd=REPOSITORY)
-        _, status, usage = os.wait4(process.pid, 0)
-    process.returncode = os.waitstatus_to_exitcode(status)
+        process = subprocess.run([sys.executable, "-c", _LAUNCHER, str(peak_file), *command], stdout=out,
+                                 stderr=subprocess.STDOUT, env=env, cwd=REPOSITORY, check=False)
     if process.returncode != 0:
         tail = "\n".join(log.read_text(errors="replace").splitlines()[-20:])
         raise RuntimeError(f"{' '.join(command)} exited with {process.returncode}:\n{tail}")
-    return usage.ru_maxrss * 1024 / GB  # ru_maxrss is in KiB on Linux
+    return int(peak_file.read_text()) * 1024 / GB  # ru_maxrss is in KiB on Linux
 
 
 def lerobot_eval_command(batch: int, steps: int, output_dir: Path) -> list[str]:
