@@ -16,12 +16,12 @@ in only one of the two and gives the exact two-sided sign test on them.
 """
 
 import json
-import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import binomtest
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
 from lerobot_predvla.experiments.lr_selection import LR_SWEEP_DIR
@@ -230,8 +230,7 @@ def run_episodes(runs_dir: Path, config: str, suite: str, seed: int) -> dict[tup
 def sign_test(only_a: int, only_b: int) -> float:
     """Exact two-sided sign test (binomial, p = 1/2) on the pairs that succeed in only one of the two runs."""
     n = only_a + only_b
-    tail = sum(math.comb(n, k) for k in range(min(only_a, only_b) + 1)) / 2**n
-    return min(1.0, 2 * tail)
+    return 1.0 if n == 0 else float(binomtest(only_a, n, 0.5).pvalue)
 
 
 def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
