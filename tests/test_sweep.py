@@ -186,6 +186,27 @@ def test_a_restricted_call_with_fewer_episodes_keeps_the_other_configurations_pr
     assert after["configs"]["L3"]["n_episodes"] is None and after["runs"] == before["runs"]
 
 
+def test_seeds_flag_keeps_a_configurations_own_seeds_only_where_they_overlap(tmp_path):
+    """A configuration that names its own seeds (the Table 2 sweep's seeds 1-2 evaluations) is not run at a seed
+    `--seeds` asks for but it does not name; the others take `--seeds` as it is."""
+    import argparse
+
+    from lerobot_predvla.cli.sweep import apply_flags
+
+    configs = yaml.safe_load(sweep_file(tmp_path).read_text())["configs"]
+    configs[1]["seeds"] = [1, 2]
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], configs=configs)
+    name = configs[1]["name"]
+    flags = dict.fromkeys(("suites", "steps", "n_episodes", "episode_length", "device", "accelerate_processes",
+                           "eval_workers"))
+    for seeds, own in (([0], []), ([1, 3], [1]), (None, [1, 2])):
+        sweep = Sweep.load(path)
+        apply_flags(sweep, argparse.Namespace(**flags, seeds=seeds))
+        runs = sweep.runs()
+        assert sorted(r.seed for r in runs if r.config == name) == own
+        assert sorted(r.seed for r in runs if r.config == "predvla") == (seeds or [0])
+
+
 def test_shards_partition_training_units(tmp_path):
     sweep = Sweep.load(sweep_file(tmp_path))
     shards = [Runner(sweep, tmp_path / "runs").shard_units(None, (i, 3)) for i in range(3)]

@@ -27,7 +27,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--runs-dir", type=Path, required=True, help="Where checkpoints, logs and records go.")
     parser.add_argument("--shard", default="0/1", help="Run only shard i of n (i/n, 0-based) of the training units.")
     parser.add_argument("--configs", type=_names, default=None, help="Comma-separated configuration names.")
-    parser.add_argument("--seeds", type=_ints, default=None, help="Comma-separated seeds (replace the file's).")
+    parser.add_argument("--seeds", type=_ints, default=None,
+                        help="Comma-separated seeds (replace the file's; a configuration that names its own seeds "
+                             "keeps those among them).")
     parser.add_argument("--suites", type=_names, default=None, help="Comma-separated suites (replace the file's).")
     parser.add_argument("--steps", type=int, default=None, help="Training steps for every configuration.")
     parser.add_argument("--n-episodes", type=int, default=None, help="Rollouts per task for every configuration.")
@@ -46,8 +48,8 @@ def apply_flags(sweep: Sweep, args: argparse.Namespace) -> None:
     """Command-line values replace the sweep file's, per-configuration values included."""
     s = sweep.settings
     for spec in sweep.configs.values():
-        if args.seeds is not None:
-            spec.seeds = None
+        if args.seeds is not None and spec.seeds is not None:  # a configuration's own seeds: those also asked for
+            spec.seeds = [x for x in spec.seeds if x in args.seeds]
         if args.suites is not None:
             spec.suites = [x for x in (spec.suites or args.suites) if x in args.suites] or None
         if args.steps is not None:

@@ -111,7 +111,9 @@ class ConfigSpec:
             simulator from `eval_seed`).
         eval_seed: `lerobot-eval --seed` (default: the run's training seed). With `init_states: false` it picks the
             resets, so a checkpoint can be evaluated on resets no training or earlier evaluation saw.
-        suites, seeds, steps, n_episodes: Per-configuration replacements of the sweep-wide values.
+        suites, seeds, steps, n_episodes: Per-configuration replacements of the sweep-wide values. `--seeds` and
+            `--suites` keep a configuration's own list only where it overlaps theirs (`seeds: [1, 2]` with
+            `--seeds 0` runs nothing).
         lr_sweep: Choose `optimizer_lr` before training (`LRSweep`'s fields: `{rates: [1e-4, 3e-4, 1e-3, 3e-3],
             steps: 10000, eval_split: 0.1}`): one candidate per rate, the one with the lowest held-out loss wins.
     """
@@ -367,7 +369,7 @@ class Sweep:
         return spec.suites or self.settings.suites
 
     def seeds_of(self, spec: ConfigSpec) -> list[int]:
-        return spec.seeds or self.settings.seeds
+        return self.settings.seeds if spec.seeds is None else spec.seeds
 
     def trained_config(self, spec: ConfigSpec) -> ConfigSpec:
         return self.configs[spec.checkpoint_from] if spec.checkpoint_from else spec
