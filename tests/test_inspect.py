@@ -128,6 +128,11 @@ def test_er_variants_replay_other_inference_settings(trained, tmp_path, capsys):
     assert tiny["er_gripper_mse"] == pytest.approx(own["open_loop_gripper_mse"], rel=1e-4)
     assert own["er_action_mse"] != pytest.approx(own["open_loop_action_mse"], rel=1e-4)  # Table 2's settings move
     assert a5["er_action_mse"] != own["er_action_mse"]
+    # The gaps as multiples of the training posteriors': a vanishing step size leaves the posteriors on their priors.
+    assert set(own["er_gap_over_training"]) == {"T", "V", "A_top", "A_bottom"}
+    assert all(tiny["er_gap_over_training"][m] < own["er_gap_over_training"][m] for m in own["er_gap_over_training"])
+    assert own["er_gap_over_training"]["T"] == pytest.approx(
+        own["er_gap_per_module"]["T"] / last["posteriors"]["T"]["prior_gap"])
     printed = capsys.readouterr().out
     assert "er_lr=1e-09" in printed and "er_lambda_q=0.0,er_iterations=3" in printed and "exact open loop" in printed
 

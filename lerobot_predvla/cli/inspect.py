@@ -33,6 +33,9 @@ from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
 from lerobot_predvla.utils.checkpoints import find_pretrained
 from lerobot_predvla.utils.io import atomic_save_figure
 
+# Error regression's prior-posterior gap, as a multiple of the training posteriors', above which the summary warns.
+GAP_WARNING = 3.0
+
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("inspect", help="diagnostics and plots of a PredVLA checkpoint (no simulator)",
@@ -119,6 +122,9 @@ def run(args: argparse.Namespace) -> int:
         last["error_regression_variants"] = [
             dx.replay_er_variant(policy, data, episodes, overrides)
             for overrides in tqdm(variants, desc="error-regression variants", unit="variant")]
+        if "posteriors" in last:
+            for er in (last["error_regression"], *last["error_regression_variants"]):
+                er["er_gap_over_training"] = dx.gap_over_training(er, last["posteriors"])
     last["tasks"] = data.names
     plot_all(out, data, history, replay)
     dx.write_json(out / "inspect.json", {"dataset_root": str(root), "history": history})
@@ -163,6 +169,12 @@ def print_summary(report: dict) -> None:
         er = report["error_regression"]
         print(f"error regression replayed on one demonstration per task: action MSE {er['er_action_mse']:.4f} "
               f"(open loop {er['open_loop_action_mse']:.4f}); eps_q {er['er_eps_q']:.4g}, eps_v {er['er_eps_v']:.4g}")
+        ratio = er.get("er_gap_over_training", {})
+        if ratio and max(ratio.values()) > GAP_WARNING:
+            module = max(ratio, key=ratio.get)
+            print(f"error regression puts the posteriors up to {ratio[module]:.0f}x further from their priors than the "
+                  f"training posteriors ({module}), where the action head was never trained: Adam's first iteration "
+                  f"moves every coordinate by er_lr; try a smaller one (--er-variant er_lr=...)")
         if report.get("error_regression_variants"):
             print_er_variants(er, report["error_regression_variants"])
 

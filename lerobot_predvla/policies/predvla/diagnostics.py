@@ -254,6 +254,12 @@ def er_summary(replay: dict, data: TaskData) -> dict:
     }
 
 
+def gap_over_training(er: dict, posteriors: dict) -> dict[str, float]:
+    """Error regression's mean prior-posterior gap per module as a multiple of the training posteriors' gap: far
+    above 1, error regression puts the posteriors where the network never saw them."""
+    return {name: er["er_gap_per_module"][name] / max(p["prior_gap"], 1e-12) for name, p in posteriors.items()}
+
+
 # Inference settings an offline replay may vary (Table 2's "Online error regression" rows and the A4/A5 weights).
 ER_SETTINGS = {"er_window": int, "er_iterations": int, "er_lr": float, "er_complexity_weight": float,
                "er_lambda_v": float, "er_lambda_q": float}
