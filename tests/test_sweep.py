@@ -1,6 +1,7 @@
 """`predvla sweep`: run records, skipping, resuming, sharding and commands (fake executor); one real
 lerobot-train run through the runner; the posterior store under DistributedDataParallel (gloo, CPU)."""
 
+import argparse
 import json
 import os
 import time
@@ -46,6 +47,13 @@ def sweep_file(tmp_path: Path, **changes) -> Path:
     path = tmp_path / "sweep.yaml"
     path.write_text(yaml.safe_dump(spec))
     return path
+
+
+def cli_flags(**given) -> argparse.Namespace:
+    """`predvla sweep`'s protocol flags as parsed: None (not given) except `given`."""
+    names = ("seeds", "suites", "steps", "n_episodes", "episode_length", "device", "accelerate_processes",
+             "eval_workers")
+    return argparse.Namespace(**{**dict.fromkeys(names), **given})
 
 
 def arg(command: list[str], name: str) -> str | None:
@@ -163,8 +171,6 @@ def test_a_later_call_with_other_seeds_adds_to_the_plan(tmp_path):
 def test_a_restricted_call_with_fewer_episodes_keeps_the_other_configurations_protocol(tmp_path):
     """`--configs L3 --n-episodes 3` after a full sweep: A6 keeps its 5 episodes in the plan, and so does the
     sweep-wide protocol; only L3's description is written afresh."""
-    import argparse
-
     from lerobot_predvla.cli.sweep import apply_flags
 
     configs = yaml.safe_load(sweep_file(tmp_path).read_text())["configs"]
@@ -175,9 +181,7 @@ def test_a_restricted_call_with_fewer_episodes_keeps_the_other_configurations_pr
     assert before["configs"]["A6"]["n_episodes"] == 5
 
     later = Sweep.load(path)
-    flags = dict.fromkeys(("seeds", "suites", "steps", "episode_length", "device", "accelerate_processes",
-                           "eval_workers"))
-    apply_flags(later, argparse.Namespace(**flags, n_episodes=3))
+    apply_flags(later, cli_flags(n_episodes=3))
     fake = FakeLeRobot()
     Runner(later, tmp_path / "runs", execute=fake).run(configs=["L3"], progress=False)
     assert fake.commands == []  # L3 was already evaluated: nothing reruns
@@ -189,19 +193,15 @@ def test_a_restricted_call_with_fewer_episodes_keeps_the_other_configurations_pr
 def test_seeds_flag_keeps_a_configurations_own_seeds_only_where_they_overlap(tmp_path):
     """A configuration that names its own seeds (the Table 2 sweep's seeds 1-2 evaluations) is not run at a seed
     `--seeds` asks for but it does not name; the others take `--seeds` as it is."""
-    import argparse
-
     from lerobot_predvla.cli.sweep import apply_flags
 
     configs = yaml.safe_load(sweep_file(tmp_path).read_text())["configs"]
     configs[1]["seeds"] = [1, 2]
     path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], configs=configs)
     name = configs[1]["name"]
-    flags = dict.fromkeys(("suites", "steps", "n_episodes", "episode_length", "device", "accelerate_processes",
-                           "eval_workers"))
     for seeds, own in (([0], []), ([1, 3], [1]), (None, [1, 2])):
         sweep = Sweep.load(path)
-        apply_flags(sweep, argparse.Namespace(**flags, seeds=seeds))
+        apply_flags(sweep, cli_flags(seeds=seeds))
         runs = sweep.runs()
         assert sorted(r.seed for r in runs if r.config == name) == own
         assert sorted(r.seed for r in runs if r.config == "predvla") == (seeds or [0])

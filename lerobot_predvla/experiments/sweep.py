@@ -111,9 +111,9 @@ class ConfigSpec:
             simulator from `eval_seed`).
         eval_seed: `lerobot-eval --seed` (default: the run's training seed). With `init_states: false` it picks the
             resets, so a checkpoint can be evaluated on resets no training or earlier evaluation saw.
-        suites, seeds, steps, n_episodes: Per-configuration replacements of the sweep-wide values. `--seeds` and
-            `--suites` keep a configuration's own list only where it overlaps theirs (`seeds: [1, 2]` with
-            `--seeds 0` runs nothing).
+        suites, seeds, steps, n_episodes: Per-configuration replacements of the sweep-wide values. `--seeds` keeps
+            a configuration's own seeds only where they overlap its list (`seeds: [1, 2]` with `--seeds 0` runs
+            nothing); `--suites` keeps its own suites where they overlap, and all of `--suites` where none do.
         lr_sweep: Choose `optimizer_lr` before training (`LRSweep`'s fields: `{rates: [1e-4, 3e-4, 1e-3, 3e-3],
             steps: 10000, eval_split: 0.1}`): one candidate per rate, the one with the lowest held-out loss wins.
     """
