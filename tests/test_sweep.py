@@ -207,6 +207,24 @@ def test_seeds_flag_keeps_a_configurations_own_seeds_only_where_they_overlap(tmp
         assert sorted(r.seed for r in runs if r.config == "predvla") == (seeds or [0])
 
 
+def test_suites_flag_keeps_a_configurations_own_suites_only_where_they_overlap(tmp_path):
+    """L3 names only libero_object: `--suites libero_spatial` runs it nowhere rather than on a suite it never named;
+    the configurations without their own suites take `--suites` as it is."""
+    from lerobot_predvla.cli.sweep import apply_flags
+
+    both = ["libero_object", "libero_spatial"]
+    for suites, own in ((["libero_spatial"], []), (both, ["libero_object"]), (None, ["libero_object"])):
+        sweep = Sweep.load(sweep_file(tmp_path))
+        apply_flags(sweep, cli_flags(suites=suites))
+        runs = sweep.runs()
+        assert sorted({r.suite for r in runs if r.config == "L3"}) == own
+        assert sorted({r.suite for r in runs if r.config == "predvla"}) == (suites or both)
+    configs = yaml.safe_load(sweep_file(tmp_path).read_text())["configs"]
+    configs[2]["suites"] = []
+    with pytest.raises(SweepError, match="configuration L3: `suites` is empty"):
+        Sweep.load(sweep_file(tmp_path, configs=configs))
+
+
 def test_shards_partition_training_units(tmp_path):
     sweep = Sweep.load(sweep_file(tmp_path))
     shards = [Runner(sweep, tmp_path / "runs").shard_units(None, (i, 3)) for i in range(3)]

@@ -50,8 +50,8 @@ def apply_flags(sweep: Sweep, args: argparse.Namespace) -> None:
     for spec in sweep.configs.values():
         if args.seeds is not None and spec.seeds is not None:  # a configuration's own seeds: those also asked for
             spec.seeds = [x for x in spec.seeds if x in args.seeds]
-        if args.suites is not None:
-            spec.suites = [x for x in (spec.suites or args.suites) if x in args.suites] or None
+        if args.suites is not None and spec.suites is not None:  # likewise its own suites
+            spec.suites = [x for x in spec.suites if x in args.suites]
         if args.steps is not None:
             spec.steps = None
             if spec.lr_sweep is not None:  # the candidates shrink with the runs (their held-out loss at the end)

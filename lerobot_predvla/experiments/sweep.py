@@ -113,7 +113,7 @@ class ConfigSpec:
             resets, so a checkpoint can be evaluated on resets no training or earlier evaluation saw.
         suites, seeds, steps, n_episodes: Per-configuration replacements of the sweep-wide values. `--seeds` keeps
             a configuration's own seeds only where they overlap its list (`seeds: [1, 2]` with `--seeds 0` runs
-            nothing); `--suites` keeps its own suites where they overlap, and all of `--suites` where none do.
+            nothing), and `--suites` its own suites likewise.
         lr_sweep: Choose `optimizer_lr` before training (`LRSweep`'s fields: `{rates: [1e-4, 3e-4, 1e-3, 3e-3],
             steps: 10000, eval_split: 0.1}`): one candidate per rate, the one with the lowest held-out loss wins.
     """
@@ -316,6 +316,10 @@ class Sweep:
                 self.validate_corruption(spec, where)
             if spec.lr_sweep is not None:
                 self.validate_lr_sweep(spec, where)
+            for name, own in (("suites", spec.suites), ("seeds", spec.seeds)):
+                if own is not None and not own:
+                    raise SweepError(f"{where}: configuration {spec.name}: `{name}` is empty; leave it out to use the "
+                                     f"sweep's {name}.")
             unknown = set(self.suites_of(spec)) - set(SUITES)
             if unknown:
                 raise SweepError(f"{where}: configuration {spec.name}: unknown suites {sorted(unknown)}; use {SUITES}.")
@@ -366,7 +370,7 @@ class Sweep:
         return spec.corruption.get("source_suite") or CORRUPTION_SOURCE[suite]
 
     def suites_of(self, spec: ConfigSpec) -> list[str]:
-        return spec.suites or self.settings.suites
+        return self.settings.suites if spec.suites is None else spec.suites
 
     def seeds_of(self, spec: ConfigSpec) -> list[int]:
         return self.settings.seeds if spec.seeds is None else spec.seeds
