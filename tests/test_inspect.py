@@ -40,11 +40,12 @@ def test_inspect_reports_every_checkpoint_and_draws_the_figures(trained, tmp_pat
     assert er["er_eps_v"] > 0 and er["er_eps_q"] > 0  # finite: the visual error of the refresh steps
     # Eq. 7's eps_q per proprioceptive dimension: open loop, from the training posteriors, and the demo floor.
     q = last["proprio_error_per_dim"]
-    assert set(q) == {"open_loop", "posteriors", "demo_spread", "removed"}
+    assert set(q) == {"open_loop", "posteriors", "demo_spread", "removed", "action_mse"}
     per_dim = [q[k] for k in ("open_loop", "posteriors", "demo_spread")]
     assert len({len(v) for v in per_dim}) == 1 and len(q["open_loop"]) > 1
     assert all(0.0 <= x < 1e3 for v in per_dim for x in v) and sum(q["demo_spread"]) > 0.0
-    assert set(q["removed"]) == {"proprio", "vision"} and all(x < 1.0 for x in q["removed"].values())
+    assert set(q["removed"]) == {"proprio", "vision", "action"} and all(x < 1.0 for x in q["removed"].values())
+    assert q["removed"]["action"] == pytest.approx(1 - q["action_mse"]["posteriors"] / q["action_mse"]["open_loop"])
     assert set(last["forces"]["posterior_term_grad_norm"]) == {"T", "V", "A_top", "A_bottom"}
     for name in ("open_loop_vs_demos", "language_swap", "prior_posterior_gap", "errors_over_episode",
                  "training_curves", "proprio_error_per_dim"):
@@ -61,7 +62,7 @@ def test_proprio_report_averages_to_the_models_eps_q(trained, synthetic_dataset)
     policy = PredVLAPolicy.from_pretrained(trained / "checkpoints" / "last" / "pretrained_model").eval()
     data = dx.TaskData.load(synthetic_dataset, policy)
     per_dim = dx.proprio_report(policy, data, None)
-    assert set(per_dim) == {"open_loop", "demo_spread"}
+    assert set(per_dim) == {"open_loop", "demo_spread", "action_mse"}
     model, seq = policy.model, data.sequences
     batch = seq.batch(torch.arange(seq.state.shape[0]), torch.device("cpu"))
     with torch.no_grad():
@@ -82,7 +83,8 @@ def test_removed_fraction_compares_the_posteriors_rollout_with_open_loop(trained
     path = trained / "checkpoints" / "last" / "pretrained_model"
     policy = PredVLAPolicy.from_pretrained(path).eval()
     data, store = dx.TaskData.load(synthetic_dataset, policy), dx.load_store(path)
-    removed = dx.proprio_report(policy, data, store)["removed"]
+    report = dx.proprio_report(policy, data, store)
+    removed = report["removed"]
     model, seq = policy.model, data.sequences
     batch = seq.batch(torch.arange(seq.state.shape[0]), torch.device("cpu"))
     valid = batch["valid"]
@@ -93,10 +95,14 @@ def test_removed_fraction_compares_the_posteriors_rollout_with_open_loop(trained
         for c_q in (None, store.transpose(0, 1)):
             traj = model.rollout(model.initial_state(valid.shape[1]), lang, c_q, steps=valid.shape[0])
             eps_v, eps_q = model.prediction_errors(traj, batch["vision"], batch["state"])
-            errors.append((float(eps_q[valid].mean()), float(eps_v[fresh].mean())))
-    (ol_q, ol_v), (post_q, post_v) = errors
+            raw_error = data.raw(traj.a_hat)[valid] - data.raw(batch["action"])[valid]
+            errors.append((float(eps_q[valid].mean()), float(eps_v[fresh].mean()), float(raw_error.pow(2).mean())))
+    (ol_q, ol_v, ol_a), (post_q, post_v, post_a) = errors
     assert removed["proprio"] == pytest.approx(1 - post_q / ol_q, rel=1e-5)
     assert removed["vision"] == pytest.approx(1 - post_v / ol_v, rel=1e-5)
+    # The decoded actions against the demonstrated ones in raw units, as error regression's action MSE is reported.
+    assert report["action_mse"] == pytest.approx({"open_loop": ol_a, "posteriors": post_a}, rel=1e-5)
+    assert removed["action"] == pytest.approx(1 - post_a / ol_a, rel=1e-5)
 
 
 def test_every_keeps_multiples_and_the_last_checkpoint(tmp_path):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments.report import FIGURES, load_summary, write_report
+from lerobot_predvla.experiments.report import FIGURES, MISSING, load_summary, write_report
 from lerobot_predvla.experiments.sweep import ConfigSpec
 from lerobot_predvla.utils.io import atomic_write_json
 
@@ -225,14 +225,17 @@ def test_starts_and_mechanism_sections_read_the_files_beside_the_report(runs, tm
                                                               strict=True)}}
     (out / "inspect" / "seed0").mkdir(parents=True)
     (out / "inspect" / "seed0" / "inspect.json").write_text(json.dumps(
-        {"history": [{"step": 5000, **step}, {"step": 10000, **step}]}))
+        {"history": [{"step": 5000, **step}, {"step": 10000, **step, "proprio_error_per_dim": {
+            "removed": {"proprio": 0.29, "vision": 0.087, "action": 0.9999}}}]}))
     write_report(runs, out)
     text = (out / "report.md").read_text()
     assert "## Demonstrations' starts" in text and "within 3.0 mm" in text
     assert "| arm joints, std over starts (rad) | 0.0200 | 0.0100 |" in text
     assert "| objects, std of x, y over starts (mm) | 3.00 | 1.50 |" in text
     assert "## The mechanism over training" in text and "### seed0" in text
-    assert "| 10,000 | 30 | 0.027 / 0.103 | 29 / 9 | 0.100 / 0.200 / 0.300 / 0.400 |" in text
+    # A history written before the action error was reported shows it as missing.
+    assert f"| 5,000 | 30 | 0.027 / 0.103 | 29 / 9 / {MISSING} | 0.100 / 0.200 / 0.300 / 0.400 |" in text
+    assert "| 10,000 | 30 | 0.027 / 0.103 | 29 / 9 / 100 | 0.100 / 0.200 / 0.300 / 0.400 |" in text
 
 
 def test_baselines_learning_rates_from_the_sweeps_selection(runs, tmp_path):

@@ -159,8 +159,9 @@ def print_summary(report: dict) -> None:
                                for label, name in TOP_WEIGHTS.items()))
     q = report["proprio_error_per_dim"]
     if "removed" in q:
-        print(f"the training posteriors remove {q['removed']['proprio']:.0%} of the open loop's proprioceptive error "
-              f"and {q['removed']['vision']:.0%} of its visual error")
+        print(f"the training posteriors remove {q['removed']['proprio']:.0%} of the open loop's proprioceptive error, "
+              f"{q['removed']['vision']:.0%} of its visual error and {q['removed']['action']:.0%} of its action error "
+              f"(action MSE {q['action_mse']['posteriors']:.4f}, open loop {q['action_mse']['open_loop']:.4f})")
     for name in ("open_loop", "posteriors", "demo_spread"):
         if name in q:
             print(f"proprioceptive error per dimension, {name.replace('_', ' ')}: "
@@ -314,8 +315,9 @@ def training_curves(plt, steps: list[int], history: list[dict], tasks: int):
     axes[2].set(title="instruction swap: how far the open-loop actions move")
     removed = [h["proprio_error_per_dim"].get("removed") for h in history]
     if all(r is not None for r in removed):
-        for key in ("proprio", "vision"):
-            axes[3].plot(steps, [100 * r[key] for r in removed], "o-", label=key)
+        for key in ("proprio", "vision", "action"):
+            if all(key in r for r in removed):  # histories written before the action error was reported lack it
+                axes[3].plot(steps, [100 * r[key] for r in removed], "o-", label=key)
     axes[3].set(title="open-loop prediction error the training posteriors remove (%)")
     if all("posteriors" in h for h in history):
         for name in MODULE_NAMES:

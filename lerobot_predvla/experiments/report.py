@@ -693,7 +693,8 @@ def mechanism_rows(history: list[dict]) -> list[list[str]]:
             f"{h['step']:,}" if h.get("step") is not None else MISSING,
             f"{100 * lang['open_loop_picks_own_task']:.0f}",
             f"{lang['mean_language_swap_mse']:.3f} / {lang['mean_demo_gap']:.3f}",
-            f"{100 * removed['proprio']:.0f} / {100 * removed['vision']:.0f}" if removed else MISSING,
+            " / ".join(f"{100 * removed[k]:.0f}" if k in removed else MISSING for k in ("proprio", "vision", "action"))
+            if removed else MISSING,
             " / ".join(f"{post[m]['prior_gap']:.3f}" for m in MODULE_NAMES) if post else MISSING,
         ])
     return rows
@@ -709,9 +710,9 @@ def mechanism_section(out: Path) -> list[str]:
              "`predvla inspect` on the training checkpoints, without the simulator: how often the exact open loop is "
              "closest to its own task's mean demonstration (%, chance: one task in the number of tasks); how far "
              "swapping the instruction moves the open-loop actions, against how far the tasks' mean demonstrations "
-             "lie apart (action MSE); the open-loop prediction error the training posteriors remove (%, "
-             "proprioceptive / visual); the training prior-posterior gap per module (" + " / ".join(MODULE_NAMES)
-             + ")."]
+             "lie apart (action MSE); the open-loop error the training posteriors remove (%, proprioceptive / "
+             "visual prediction, action against the demonstrated one); the training prior-posterior gap per "
+             "module (" + " / ".join(MODULE_NAMES) + ")."]
     for path in found:
         seed = path.parent.name
         lines += ["", f"### {seed}", "", _table(["step", "open loop picks own task (%)", "language swap / demo gap",

@@ -170,7 +170,9 @@ def proprio_report(policy: PredVLAPolicy, data: TaskData, store: Tensor | None) 
     own training posteriors; beside them the demonstrations' spread around their task's time-aligned mean state,
     which no observation-blind chain can get below. Posteriors that explain how demonstrations differ bring the
     second well below the first: `removed` is the fraction of the open-loop eps_q and eps_v (the latter on visual
-    refresh steps) that the posteriors remove, 1 - posteriors / open loop.
+    refresh steps) that the posteriors remove, 1 - posteriors / open loop. `action_mse` (raw units) compares the
+    decoded actions with the demonstrated ones: from the training posteriors it is what error regression would
+    give were it to recover them exactly, `removed["action"]` its fraction of the open loop's.
     """
     model, seq = policy.model, data.sequences
     batch = seq.batch(torch.arange(seq.state.shape[0]), torch.device("cpu"))
@@ -181,14 +183,17 @@ def proprio_report(policy: PredVLAPolicy, data: TaskData, store: Tensor | None) 
     if store is not None:
         trajectories["posteriors"] = model.rollout(model.initial_state(valid.shape[1]), lang_term,
                                                    store.transpose(0, 1))
-    out, mean_errors = {}, {}
+    out, mean_errors = {"action_mse": {}}, {}
+    demo_action = data.raw(batch["action"])[valid]
     for name, traj in trajectories.items():
         out[name] = (traj.q_hat - state)[valid].pow(2).mean(0).tolist()
         eps_v, eps_q = model.prediction_errors(traj, batch["vision"], state)
-        mean_errors[name] = {"proprio": float(eps_q[valid].mean()), "vision": float(eps_v[fresh].mean())}
+        out["action_mse"][name] = action_mse(data.raw(traj.a_hat)[valid], demo_action)
+        mean_errors[name] = {"proprio": float(eps_q[valid].mean()), "vision": float(eps_v[fresh].mean()),
+                             "action": out["action_mse"][name]}
     if store is not None:
         out["removed"] = {key: 1.0 - mean_errors["posteriors"][key] / mean_errors["open_loop"][key]
-                          for key in ("proprio", "vision")}
+                          for key in ("proprio", "vision", "action")}
     mean_state = state.clone()
     w = valid.float()[..., None]
     for eps in data.episodes:
