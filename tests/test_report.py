@@ -15,7 +15,7 @@ SUITES4 = ("libero_spatial", "libero_goal", "libero_object", "libero_10")
 SHORT = SUITES4[:3]
 SEEDS = (0, 1, 2)
 CONFIGS = [
-    ConfigSpec("predvla", "main", "PredVLA"),
+    ConfigSpec("predvla", "main", "PredVLA", paper={"libero_object": [89.24, 6.13]}),
     ConfigSpec("B2", "baseline", "BC-RNN (LSTM)"),
     ConfigSpec("L1", "ladder", "- Online error regression", checkpoint_from="predvla",
                eval_overrides={"er_iterations": 0}, suites=list(SHORT)),
@@ -27,7 +27,7 @@ CONFIGS = [
     ConfigSpec("A5", "ablation", "- Proprioceptive error in ER", checkpoint_from="predvla", compare_to="predvla",
                eval_overrides={"er_lambda_q": 0.0}, suites=list(SHORT)),
     ConfigSpec("A6", "ablation", "- Online ER", checkpoint_from="predvla", compare_to="predvla",
-               eval_overrides={"er_iterations": 0}),
+               eval_overrides={"er_iterations": 0}, paper={"libero_object": 78.14}),
     *[ConfigSpec(f"C{ch[0]}{int(a * 100)}", "corruption", f"{ch} alpha={a}", checkpoint_from="predvla",
                  compare_to="predvla", corruption={"channel": ch, "alpha": a, "open_loop": "A6"}, suites=list(SHORT))
       for ch in ("vision", "proprio") for a in (0.25, 0.5)],
@@ -68,7 +68,7 @@ def runs(tmp_path_factory) -> Path:
     configs = {}
     for spec in CONFIGS:
         configs[spec.name] = {k: getattr(spec, k) for k in (
-            "group", "label", "compare_to", "branch", "corruption", "eval_overrides", "checkpoint_from")}
+            "group", "label", "compare_to", "branch", "corruption", "eval_overrides", "checkpoint_from", "paper")}
     atomic_write_json(runs / "plan.json", {"runs": planned, "configs": configs})
     return runs
 
@@ -207,6 +207,20 @@ def test_runs_share_their_starts_only_with_the_same_seed_and_resets():
     resets = {**official, "init_states": False, "eval_seed": 1000, "n_episodes_per_task": 5}
     assert same_starts(resets, dict(resets)) and not same_starts(resets, official)
     assert not same_starts(resets, {**resets, "n_episodes_per_task": 10})
+
+
+def test_paper_section_sets_the_published_numbers_beside_ours(runs, tmp_path):
+    """A configuration's `paper` (mean and std, or the mean alone) becomes a row beside our mean over seeds."""
+    write_report(runs, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "## Beside the paper" in text
+    for name, label, paper, shown in (("predvla", "PredVLA", 89.24, "89.24 ± 6.13"),
+                                      ("A6", "- Online ER", 78.14, "78.14")):
+        ours = [rate(name, "libero_object", s) for s in SEEDS]
+        mean, std = float(np.mean(ours)), float(np.std(ours, ddof=1))
+        assert f"| {label} | object | {mean:.2f} ± {std:.2f} | {shown} | {mean - paper:+.2f} |" in text
+    section = text.split("## Beside the paper")[1].split("\n## ")[0]
+    assert section.count("| object |") == 2  # only the configurations with a published number
 
 
 def test_starts_and_mechanism_sections_read_the_files_beside_the_report(runs, tmp_path):

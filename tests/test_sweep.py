@@ -266,6 +266,9 @@ def test_bad_sweep_files_name_the_problem(tmp_path, capsys):
         ({"configs": [{"name": "x", "checkpoint_from": "y"}]}, "unknown configuration 'y'"),
         ({"datasets": {}}, "`datasets` has no entry"),
         ({"configs": [{"name": "x", "nonsense": 1}]}, "nonsense"),
+        ({"configs": [{"name": "x", "paper": {"libero_objects": 89.2}}]}, "`paper` maps a suite"),
+        ({"configs": [{"name": "x", "paper": {"libero_object": [89.2, 6.1, 3]}}]}, "`paper` maps a suite"),
+        ({"configs": [{"name": "x", "seeds": []}]}, "`seeds` is empty"),
     ]
     for changes, message in cases:
         path = sweep_file(tmp_path, **changes)

@@ -189,6 +189,7 @@ class Results:
         out = {"protocol": self.protocol, "suites": self.suites(), "reference": reference, "configs": {}}
         for name, c in self.configs.items():
             entry = {**{k: c.get(k) for k in ("group", "label", "compare_to", "branch", "corruption")},
+                     "paper": c.get("paper") or {},
                      "params": self.params.get(name),
                      "suites": {s: self.cell(name, s) for s in self.suites()},
                      "mean3": self.suite_mean(name, SHORT_SUITES),
@@ -318,6 +319,19 @@ def main_table(summary: dict) -> str | None:
             row += [fmt_cell(c["suites"]["libero_10"]), fmt_num(c["mean4"])]
         rows.append(row)
     return _table(header, rows)
+
+
+def paper_table(summary: dict) -> str | None:
+    """Every configuration with a published number (the sweep file's `paper`) beside ours, per suite."""
+    rows = []
+    for name, c in summary["configs"].items():
+        for suite, value in c.get("paper", {}).items():
+            mean, std = (value + [None])[:2] if isinstance(value, list) else (value, None)
+            ours = c["suites"].get(suite)
+            rows.append([_label(summary, name), SUITE_LABELS[suite], fmt_cell(ours) if ours else MISSING,
+                         f"{mean:.2f}" + (f" ± {std:.2f}" if std is not None else ""),
+                         fmt_num(ours["mean"] - mean if ours and ours["mean"] is not None else None, signed=True)])
+    return _table(["Model", "suite", "ours", "paper", "ours − paper"], rows) if rows else None
 
 
 def baseline_table(summary: dict) -> str | None:
@@ -630,6 +644,12 @@ def _relative(command: list[str]) -> str:
     return " ".join(words)
 
 
+def _stage_commands(command: list[str] | list[list[str]]) -> str:
+    """A data stage's command, or the commands of the processes that shared its work (run side by side)."""
+    commands = command if command and isinstance(command[0], list) else [command]
+    return " and ".join(f"`{_relative(c)}`" for c in commands)
+
+
 def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
     """Wall time of every recorded stage (data, training, evaluation) and the exact commands."""
     lines = []
@@ -637,7 +657,7 @@ def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
         stages = _load_json(path)
         lines += [f"Data stages of {path.stem}:", "",
                   _table(["stage", "wall time (min)", "command"],
-                         [[k, f"{v['wall_s'] / 60:.1f}", f"`{_relative(v['command'])}`"] for k, v in stages.items()]),
+                         [[k, f"{v['wall_s'] / 60:.1f}", _stage_commands(v["command"])] for k, v in stages.items()]),
                   ""]
     rows, commands = [], []
     for r in sorted(records, key=lambda r: (r["config"], r["suite"], int(r["seed"]))):
@@ -776,6 +796,9 @@ def write_report(runs_dir: Path, out: Path) -> dict:
     for title, table, figure, note in (
         ("Main results", main_table(summary), None, "3-suite mean: spatial, goal, object; 4-suite adds long."),
         ("Controlled baselines", baseline_table(summary), None, "Mean over the suites shown."),
+        ("Beside the paper", paper_table(summary), None,
+         "The paper's published success of the same configuration (its Tables 3-5: mean ± standard deviation over "
+         "its seeds) beside ours."),
         ("Trainable parameters vs success", None, "params",
          "Published points are reported numbers with different protocols, for scale only."),
         ("Ladder", ladder_table(summary), "ladder",

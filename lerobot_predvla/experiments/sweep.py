@@ -116,6 +116,8 @@ class ConfigSpec:
             nothing), and `--suites` its own suites likewise.
         lr_sweep: Choose `optimizer_lr` before training (`LRSweep`'s fields: `{rates: [1e-4, 3e-4, 1e-3, 3e-3],
             steps: 10000, eval_split: 0.1}`): one candidate per rate, the one with the lowest held-out loss wins.
+        paper: The paper's published success (%) of the same configuration per suite, `{libero_object: [89.24, 6.13]}`
+            (mean and standard deviation over its seeds, or the mean alone); `predvla report` sets it beside ours.
     """
 
     name: str
@@ -138,6 +140,7 @@ class ConfigSpec:
     steps: int | None = None
     n_episodes: int | None = None
     lr_sweep: LRSweep | None = None
+    paper: dict[str, float | list[float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if isinstance(self.lr_sweep, dict):  # as read from a sweep file
@@ -320,6 +323,12 @@ class Sweep:
                 if own is not None and not own:
                     raise SweepError(f"{where}: configuration {spec.name}: `{name}` is empty; leave it out to use the "
                                      f"sweep's {name}.")
+            for suite, value in spec.paper.items():
+                numbers = value if isinstance(value, list) else [value]
+                if suite not in SUITES or not 1 <= len(numbers) <= 2 or not all(
+                        isinstance(x, int | float) for x in numbers):
+                    raise SweepError(f"{where}: configuration {spec.name}: `paper` maps a suite of {SUITES} to a "
+                                     f"success (%) or [mean, std]; got {suite}: {value!r}.")
             unknown = set(self.suites_of(spec)) - set(SUITES)
             if unknown:
                 raise SweepError(f"{where}: configuration {spec.name}: unknown suites {sorted(unknown)}; use {SUITES}.")
