@@ -797,7 +797,7 @@ def write_report(runs_dir: Path, out: Path) -> dict:
         ("Main results", main_table(summary), None, "3-suite mean: spatial, goal, object; 4-suite adds long."),
         ("Controlled baselines", baseline_table(summary), None, "Mean over the suites shown."),
         ("Beside the paper", paper_table(summary), None,
-         "The paper's published success of the same configuration (its Tables 3-5: mean ± standard deviation over "
+         "The paper's published success of the same configuration (its Tables 3-6: mean ± standard deviation over "
          "its seeds) beside ours."),
         ("Trainable parameters vs success", None, "params",
          "Published points are reported numbers with different protocols, for scale only."),
