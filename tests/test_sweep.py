@@ -202,6 +202,7 @@ def test_seeds_flag_keeps_a_configurations_own_seeds_only_where_they_overlap(tmp
     for seeds, own in (([0], []), ([1, 3], [1]), (None, [1, 2])):
         sweep = Sweep.load(path)
         apply_flags(sweep, cli_flags(seeds=seeds))
+        sweep.validate(path)  # as `predvla sweep` does after the flags: a configuration left no seeds is valid
         runs = sweep.runs()
         assert sorted(r.seed for r in runs if r.config == name) == own
         assert sorted(r.seed for r in runs if r.config == "predvla") == (seeds or [0])
@@ -216,6 +217,7 @@ def test_suites_flag_keeps_a_configurations_own_suites_only_where_they_overlap(t
     for suites, own in ((["libero_spatial"], []), (both, ["libero_object"]), (None, ["libero_object"])):
         sweep = Sweep.load(sweep_file(tmp_path))
         apply_flags(sweep, cli_flags(suites=suites))
+        sweep.validate(tmp_path / "sweep.yaml")
         runs = sweep.runs()
         assert sorted({r.suite for r in runs if r.config == "L3"}) == own
         assert sorted({r.suite for r in runs if r.config == "predvla"}) == (suites or both)

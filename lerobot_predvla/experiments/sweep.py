@@ -297,6 +297,11 @@ class Sweep:
         for spec in configs:
             if spec.name in sweep.configs:
                 raise SweepError(f"{path}: configuration name {spec.name!r} appears twice.")
+            for name, own in (("suites", spec.suites), ("seeds", spec.seeds)):
+                # In the file only: `--seeds` / `--suites` may leave a configuration none of its own (not run).
+                if own is not None and not own:
+                    raise SweepError(f"{path}: configuration {spec.name}: `{name}` is empty; leave it out to use the "
+                                     f"sweep's {name}.")
             sweep.configs[spec.name] = spec
         sweep.validate(path)
         return sweep
@@ -319,10 +324,6 @@ class Sweep:
                 self.validate_corruption(spec, where)
             if spec.lr_sweep is not None:
                 self.validate_lr_sweep(spec, where)
-            for name, own in (("suites", spec.suites), ("seeds", spec.seeds)):
-                if own is not None and not own:
-                    raise SweepError(f"{where}: configuration {spec.name}: `{name}` is empty; leave it out to use the "
-                                     f"sweep's {name}.")
             for suite, value in spec.paper.items():
                 numbers = value if isinstance(value, list) else [value]
                 if suite not in SUITES or not 1 <= len(numbers) <= 2 or not all(
