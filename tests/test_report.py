@@ -241,8 +241,11 @@ def test_starts_and_mechanism_sections_read_the_files_beside_the_report(runs, tm
     (out / "inspect" / "seed0" / "inspect.json").write_text(json.dumps(
         {"history": [{"step": 5000, **step}, {"step": 10000, **step, "proprio_error_per_dim": {
             "removed": {"proprio": 0.29, "vision": 0.087, "action": 0.9999}}}]}))
+    (out / "inspect" / "seed0_030000").mkdir()  # one checkpoint inspected on its own: cited elsewhere, not a seed
+    (out / "inspect" / "seed0_030000" / "inspect.json").write_text(json.dumps({"history": [{"step": None, **step}]}))
     write_report(runs, out)
     text = (out / "report.md").read_text()
+    assert "### seed0_030000" not in text
     assert "## Demonstrations' starts" in text and "within 3.0 mm" in text
     assert "| arm joints, std over starts (rad) | 0.0200 | 0.0100 |" in text
     assert "| objects, std of x, y over starts (mm) | 3.00 | 1.50 |" in text

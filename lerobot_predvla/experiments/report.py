@@ -723,7 +723,8 @@ def mechanism_rows(history: list[dict]) -> list[list[str]]:
 def mechanism_section(out: Path) -> list[str]:
     """Per training seed inspected beside the report (`inspect/seed<N>/inspect.json`): the mechanism's numbers per
     checkpoint and the figure over training."""
-    found = sorted((out / INSPECT_DIR).glob("seed*/inspect.json"), key=lambda p: p.parent.name)
+    found = sorted((p for p in (out / INSPECT_DIR).glob("seed*/inspect.json") if p.parent.name[4:].isdigit()),
+                   key=lambda p: int(p.parent.name[4:]))  # seed<N>/: one seed over training, not single checkpoints
     if not found:
         return []
     lines = ["", "## The mechanism over training", "",
