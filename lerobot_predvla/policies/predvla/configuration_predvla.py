@@ -108,7 +108,7 @@ class PredVLAConfig(CachedFeaturesConfig):
             training posteriors sit closer to their priors than that, error regression drives the action head where
             it was never trained (`predvla inspect` warns and compares step sizes with `--er-variant er_lr=...`;
             docs/research/table2.md: on Table 2's own checkpoint 0.05 does; 0.002 halves the action error on
-            replayed demonstrations without, so far, more successes in the simulator).
+            replayed demonstrations without more successes in the simulator on the episodes evaluated).
         er_complexity_weight: w_ER, the complexity weight of every module during error regression
             (Table 2: 1.0).
         er_lambda_v: Visual prediction-error weight during error regression (1; 0 is ablation A4).
