@@ -197,6 +197,62 @@ def test_compared_runs_are_paired_episode_by_episode(tmp_path):
     assert "## Paired episodes" in text and "| ol | er | object | 0, 1 | 16 | 7 / 10 | 1 / 4 | 0.375 |" in text
 
 
+def test_pooled_configurations_gather_their_seeds_and_paired_episodes(tmp_path):
+    """`pool_with`: seed 0 at 4 episodes per task and seeds 1-2 at 2 in other configurations make one row over
+    the three seeds (mean and sample std) and one paired comparison over all their episodes."""
+    runs = tmp_path / "runs"
+    outcomes = {  # (config, seed) -> per task, per episode
+        ("er", 0): {0: [True, True, False, True], 1: [True, False, True, True]},
+        ("ol", 0): {0: [True, False, False, False], 1: [False, False, True, True]},
+        ("er_seeds", 1): {0: [True, False], 1: [False, False]},
+        ("ol_seeds", 1): {0: [True, True], 1: [True, False]},
+        ("er_seeds", 2): {0: [True, True], 1: [True, True]},
+        ("ol_seeds", 2): {0: [False, True], 1: [True, True]},
+    }
+    describe = {"er": ("main", None, None), "ol": ("ablation", "er", None),
+                "er_seeds": ("main", None, "er"), "ol_seeds": ("ablation", "er_seeds", "ol")}
+    for (config, seed), tasks in outcomes.items():
+        for task, successes in tasks.items():
+            part = runs / "eval" / config / "libero_object" / f"seed{seed}" / f"task{task}"
+            part.mkdir(parents=True)
+            write_eval_info(part, {task: successes})
+        group, compare_to, pool_with = describe[config]
+        atomic_write_json(runs / "records" / config / "libero_object" / f"seed{seed}.json", {
+            "config": config, "suite": "libero_object", "seed": seed, "group": group, "label": config,
+            "compare_to": compare_to, "pool_with": pool_with, "eval_seed": seed, "init_states": True,
+            "n_episodes_per_task": len(tasks[0]), "episode_length": 600,
+            "tasks": {str(t): {"successes": sum(s), "episodes": len(s)} for t, s in tasks.items()}})
+    summary = write_report(runs, tmp_path / "report")
+    rates = {0: 75.0, 1: 25.0, 2: 100.0}  # er per seed: 6/8, 1/4, 4/4
+    pooled = summary["pooled"]["er"]
+    assert pooled["configs"] == ["er", "er_seeds"]
+    cell = pooled["suites"]["libero_object"]
+    assert cell["n"] == 3 and cell["seeds"] == {str(k): v for k, v in rates.items()}
+    assert cell["mean"] == pytest.approx(np.mean(list(rates.values())))
+    assert cell["std"] == pytest.approx(np.std(list(rates.values()), ddof=1))
+    # Pairs: seed 0 only ol 0, only er 3 (as above); seed 1 only ol 2, only er 0; seed 2 only ol 0, only er 1.
+    pairs = summary["pooled"]["ol"]["episodes"]["libero_object"]
+    assert pairs == {"against": "er + er_seeds", "seeds": [0, 1, 2], "pairs": 16, "successes": 9,
+                     "against_successes": 11, "only": 2, "only_against": 4,
+                     "sign_test_p": pytest.approx(2 * (1 + 6 + 15) / 64)}
+    text = (tmp_path / "report" / "report.md").read_text()
+    main = text.split("## Main results")[1].split("\n## ")[0]
+    assert f"| er, pooled seeds (er + er_seeds) | — | {cell['mean']:.2f} ± {cell['std']:.2f} |" in main
+    assert "| ol + ol_seeds | er + er_seeds | object | 0, 1, 2 | 16 | 9 / 11 | 2 / 4 | 0.688 |" in text
+
+
+def test_a_seed_in_two_pooled_configurations_is_an_error(tmp_path):
+    from lerobot_predvla.experiments.report import ReportError
+
+    runs = tmp_path / "runs"
+    for config, pool_with in (("er", None), ("er_seeds", "er")):
+        atomic_write_json(runs / "records" / config / "libero_object" / "seed0.json", {
+            "config": config, "suite": "libero_object", "seed": 0, "group": "main", "pool_with": pool_with,
+            "tasks": {"0": {"successes": 1, "episodes": 2}}})
+    with pytest.raises(ReportError, match=r"seeds \[0\] of libero_object"):
+        write_report(runs, tmp_path / "report")
+
+
 def test_runs_share_their_starts_only_with_the_same_seed_and_resets():
     from lerobot_predvla.experiments.report import same_starts
 

@@ -151,7 +151,8 @@ def test_killed_training_resumes_and_killed_eval_is_redone(tmp_path):
 
 
 def test_a_later_call_with_other_seeds_adds_to_the_plan(tmp_path):
-    """`--seeds 1` after a seed-0 sweep plans seed 1 beside seed 0, so the report still knows both."""
+    """`--configs predvla --seeds 1` after a seed-0 sweep plans predvla's seed 1 beside seed 0, so the report
+    still knows both, and no other configuration at seed 1: that call runs none."""
     path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"])
     Runner(Sweep.load(path), tmp_path / "runs", execute=FakeLeRobot()).run(progress=False)
     later = Sweep.load(path)
@@ -159,9 +160,9 @@ def test_a_later_call_with_other_seeds_adds_to_the_plan(tmp_path):
     Runner(later, tmp_path / "runs", execute=FakeLeRobot()).run(configs=["predvla"], progress=False)
     plan = json.loads((tmp_path / "runs/plan.json").read_text())
     assert sorted((r["config"], r["seed"]) for r in plan["runs"]) == [
-        ("A6", 0), ("A6", 1), ("L3", 0), ("L3", 1), ("predvla", 0), ("predvla", 1)]
+        ("A6", 0), ("L3", 0), ("predvla", 0), ("predvla", 1)]
     summary = write_report(tmp_path / "runs", tmp_path / "report")
-    assert sorted(summary["missing_runs"]) == ["A6/libero_object/seed1", "L3/libero_object/seed1"]
+    assert summary["missing_runs"] == []
 
     (tmp_path / "runs/plan.json").write_text("{not json")
     with pytest.raises(SweepError, match="plan.json"):
@@ -587,3 +588,26 @@ def test_evaluation_parts_run_in_parallel_workers_with_their_own_logs(tmp_path):
     bad = sweep_file(tmp_path / "bad", eval={"device": "cpu", "workers": 0})
     with pytest.raises(SweepError, match="eval.workers must be >= 1"):
         Sweep.load(bad)
+
+
+def test_pool_with_names_a_pool_whose_paired_episodes_pool_too(tmp_path):
+    """Seeds 1-2 of error regression and open loop pool with seed 0's: accepted; a pool whose comparisons would
+    not pool, a chain of pools or an unknown name is refused, naming the configuration."""
+    er, ol = {"name": "predvla"}, {"name": "A6", "checkpoint_from": "predvla", "compare_to": "predvla"}
+    er_seeds = {"name": "er_seeds", "checkpoint_from": "predvla", "seeds": [1], "pool_with": "predvla"}
+    ol_seeds = {"name": "ol_seeds", "checkpoint_from": "predvla", "seeds": [1], "compare_to": "er_seeds",
+                "pool_with": "A6"}
+    sweep = Sweep.load(sweep_file(tmp_path, configs=[er, ol, er_seeds, ol_seeds]))
+    assert sweep.configs["ol_seeds"].pool_with == "A6"
+    unpooled_reference = {**er_seeds, "pool_with": None}
+    with pytest.raises(SweepError, match="configuration ol_seeds: pool_with 'A6': its compare_to 'er_seeds' must "
+                                         "pool with 'predvla'"):
+        Sweep.load(sweep_file(tmp_path, configs=[er, ol, unpooled_reference, ol_seeds]))
+    with pytest.raises(SweepError, match="configuration chained: pool_with 'er_seeds': must name a configuration "
+                                         "that pools with none"):
+        Sweep.load(sweep_file(tmp_path, configs=[er, er_seeds, {**er_seeds, "name": "chained",
+                                                                "pool_with": "er_seeds"}]))
+    with pytest.raises(SweepError, match="both or neither"):
+        Sweep.load(sweep_file(tmp_path, configs=[er, ol, {**er_seeds, "pool_with": "A6"}]))
+    with pytest.raises(SweepError, match="unknown configuration 'nope'"):
+        Sweep.load(sweep_file(tmp_path, configs=[er, {**er_seeds, "pool_with": "nope"}]))

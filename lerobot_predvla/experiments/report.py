@@ -101,6 +101,18 @@ def _mean_std(values: list[float]) -> tuple[float | None, float | None]:
     return float(arr.mean()), float(arr.std(ddof=1)) if len(arr) > 1 else 0.0
 
 
+def _cell(seeds: dict[int, float], planned: list[int]) -> dict:
+    """A table cell: mean and sample std over the seeds' success rates, with the planned seeds it lacks."""
+    mean, std = _mean_std(list(seeds.values()))
+    return {"mean": mean, "std": std, "n": len(seeds), "planned": len(planned),
+            "seeds": {str(k): v for k, v in sorted(seeds.items())}, "missing_seeds": sorted(set(planned) - set(seeds))}
+
+
+def _suite_mean(cells: list[dict]) -> float | None:
+    means = [c["mean"] for c in cells]
+    return float(np.mean(means)) if all(m is not None for m in means) else None
+
+
 @dataclass
 class Results:
     """Per-seed success rates and per-task rates, indexed by configuration and suite."""
@@ -124,7 +136,7 @@ class Results:
                 k: 100.0 * t["successes"] / t["episodes"] for k, t in r["tasks"].items()
             }
             configs.setdefault(r["config"], {k: r.get(k) for k in (
-                "group", "label", "compare_to", "branch", "corruption", "eval_overrides")})
+                "group", "label", "compare_to", "pool_with", "branch", "corruption", "eval_overrides")})
             if r.get("parameters") is not None:
                 params[r["config"]] = int(r["parameters"])
         planned: dict = {}
@@ -147,16 +159,32 @@ class Results:
         return [s for s in (*SHORT_SUITES, "libero_10") if s in present]
 
     def cell(self, config: str, suite: str) -> dict:
-        seeds = self.rates.get(config, {}).get(suite, {})
-        mean, std = _mean_std(list(seeds.values()))
-        planned = self.planned.get(config, {}).get(suite, [])
-        return {"mean": mean, "std": std, "n": len(seeds), "planned": len(planned),
-                "seeds": {str(k): v for k, v in sorted(seeds.items())},
-                "missing_seeds": sorted(set(planned) - set(seeds))}
+        return _cell(self.rates.get(config, {}).get(suite, {}), self.planned.get(config, {}).get(suite, []))
 
     def suite_mean(self, config: str, suites: tuple[str, ...]) -> float | None:
-        means = [self.cell(config, s)["mean"] for s in suites]
-        return float(np.mean(means)) if all(m is not None for m in means) else None
+        return _suite_mean([self.cell(config, s) for s in suites])
+
+    def pools(self) -> dict[str, list[str]]:
+        """Each configuration that others name in `pool_with`, with them: `{target: [target, *members]}`."""
+        pools: dict[str, list[str]] = {}
+        for name, c in self.configs.items():
+            if c.get("pool_with"):
+                pools.setdefault(c["pool_with"], [c["pool_with"]]).append(name)
+        return pools
+
+    def pooled_cell(self, configs: list[str], suite: str) -> dict:
+        """One cell over the union of the configurations' seeds (each seed in one configuration only)."""
+        rates: dict[int, float] = {}
+        planned: set[int] = set()
+        for name in configs:
+            own = self.rates.get(name, {}).get(suite, {})
+            twice = sorted(set(own) & set(rates))
+            if twice:
+                raise ReportError(f"configurations {configs} pool their seeds (pool_with), but seeds {twice} of "
+                                  f"{suite} were run by more than one of them.")
+            rates.update(own)
+            planned |= set(self.planned.get(name, {}).get(suite, []))
+        return _cell(rates, sorted(planned))
 
     def paired(self, config: str, reference: str, suite: str) -> dict:
         """Mean and std over matched seeds of (config - reference)."""
@@ -188,7 +216,7 @@ class Results:
         reference = self.reference()
         out = {"protocol": self.protocol, "suites": self.suites(), "reference": reference, "configs": {}}
         for name, c in self.configs.items():
-            entry = {**{k: c.get(k) for k in ("group", "label", "compare_to", "branch", "corruption")},
+            entry = {**{k: c.get(k) for k in ("group", "label", "compare_to", "pool_with", "branch", "corruption")},
                      "paper": c.get("paper") or {},
                      "params": self.params.get(name),
                      "suites": {s: self.cell(name, s) for s in self.suites()},
@@ -202,6 +230,12 @@ class Results:
                 m, p = entry["mean3"], self.suite_mean(against, SHORT_SUITES)
                 entry["delta_mean3"] = m - p if m is not None and p is not None else None
             out["configs"][name] = entry
+        out["pooled"] = {}
+        for target, names in self.pools().items():
+            cells = {s: self.pooled_cell(names, s) for s in self.suites()}
+            out["pooled"][target] = {"configs": names, "suites": cells,
+                                     "mean3": _suite_mean([cells.get(s, {"mean": None}) for s in SHORT_SUITES]),
+                                     "mean4": _suite_mean([cells.get(s, {"mean": None}) for s in SUITES])}
         return out
 
 
@@ -259,13 +293,27 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
                 entry.setdefault("episodes", {})[suite] = {
                     "against": against, "seeds": seeds, **counts,
                     "sign_test_p": sign_test(counts["only"], counts["only_against"])}
+    for pool in summary.get("pooled", {}).values():
+        for suite in summary["suites"]:
+            parts = [e for name in pool["configs"] if (e := summary["configs"][name].get("episodes", {}).get(suite))]
+            if len(parts) < 2:  # one configuration's pairs are already in the table as they are
+                continue
+            counts = {k: sum(e[k] for e in parts) for k in ("pairs", "successes", "against_successes", "only",
+                                                              "only_against")}
+            pool.setdefault("episodes", {})[suite] = {
+                "against": " + ".join(e["against"] for e in parts),
+                "seeds": sorted(seed for e in parts for seed in e["seeds"]), **counts,
+                "sign_test_p": sign_test(counts["only"], counts["only_against"])}
 
 
 def episodes_table(summary: dict) -> str | None:
-    rows = [[name, entry["episodes"][suite]["against"], SUITE_LABELS[suite],
+    """Paired episodes of every `compare_to` pair, then of every pool (`pool_with`) over its seeds together."""
+    entries = [(name, entry) for name, entry in summary["configs"].items()] + [
+        (" + ".join(pool["configs"]), pool) for pool in summary.get("pooled", {}).values()]
+    rows = [[name, e["against"], SUITE_LABELS[suite],
              ", ".join(map(str, e["seeds"])), str(e["pairs"]), f"{e['successes']} / {e['against_successes']}",
              f"{e['only']} / {e['only_against']}", f"{e['sign_test_p']:.3g}"]
-            for name, entry in summary["configs"].items() for suite in summary["suites"]
+            for name, entry in entries for suite in summary["suites"]
             if (e := entry.get("episodes", {}).get(suite))]
     if not rows:
         return None
@@ -311,24 +359,38 @@ def main_table(summary: dict) -> str | None:
     if "libero_10" in suites:
         header += ["long", "4-suite mean"]
     rows = []
+    # A pool's row (pool_with) follows the last of its configurations in the table.
+    last_of = {[n for n in names if n in pool["configs"]][-1]: target
+               for target, pool in summary.get("pooled", {}).items() if target in names}
     for n in names:
         c = summary["configs"][n]
-        row = [_label(summary, n), fmt_params(c["params"]), *[fmt_cell(c["suites"][s]) for s in short],
-               fmt_num(c["mean3"])]
-        if "libero_10" in suites:
-            row += [fmt_cell(c["suites"]["libero_10"]), fmt_num(c["mean4"])]
-        rows.append(row)
+        for label, params, cells in ((_label(summary, n), c["params"], c), *(
+                [(_pooled_label(summary, last_of[n]), summary["configs"][last_of[n]]["params"],
+                  summary["pooled"][last_of[n]])] if n in last_of else [])):
+            row = [label, fmt_params(params), *[fmt_cell(cells["suites"][s]) for s in short],
+                   fmt_num(cells["mean3"])]
+            if "libero_10" in suites:
+                row += [fmt_cell(cells["suites"]["libero_10"]), fmt_num(cells["mean4"])]
+            rows.append(row)
     return _table(header, rows)
+
+
+def _pooled_label(summary: dict, target: str) -> str:
+    """The row of a pool: its target's label and every configuration whose seeds it gathers."""
+    return f"{_label(summary, target)}, pooled seeds ({' + '.join(summary['pooled'][target]['configs'])})"
 
 
 def paper_table(summary: dict) -> str | None:
     """Every configuration with a published number (the sweep file's `paper`) beside ours, per suite."""
     rows = []
+    pooled = summary.get("pooled", {})
     for name, c in summary["configs"].items():
         for suite, value in c.get("paper", {}).items():
             mean, std = (value + [None])[:2] if isinstance(value, list) else (value, None)
-            ours = c["suites"].get(suite)
-            rows.append([_label(summary, name), SUITE_LABELS[suite], fmt_cell(ours) if ours else MISSING,
+            # A pool's target stands for all its seeds (pool_with): its row sets them beside the paper's seeds.
+            ours = (pooled[name] if name in pooled else c)["suites"].get(suite)
+            label = _pooled_label(summary, name) if name in pooled else _label(summary, name)
+            rows.append([label, SUITE_LABELS[suite], fmt_cell(ours) if ours else MISSING,
                          f"{mean:.2f}" + (f" ± {std:.2f}" if std is not None else ""),
                          fmt_num(ours["mean"] - mean if ours and ours["mean"] is not None else None, signed=True)])
     return _table(["Model", "suite", "ours", "paper", "ours − paper"], rows) if rows else None

@@ -118,6 +118,11 @@ class ConfigSpec:
             steps: 10000, eval_split: 0.1}`): one candidate per rate, the one with the lowest held-out loss wins.
         paper: The paper's published success (%) of the same configuration per suite, `{libero_object: [89.24, 6.13]}`
             (mean and standard deviation over its seeds, or the mean alone); `predvla report` sets it beside ours.
+        pool_with: The configuration this one extends with further training seeds (the same model and evaluation,
+            e.g. at fewer episodes per task): `predvla report` adds a row over the union of their seeds and pools
+            their paired episodes. With `compare_to` on both, this one's must pool with the other's (open loop on
+            seeds 1-2 against error regression on seeds 1-2 pools with open loop on seed 0 against error
+            regression on seed 0).
     """
 
     name: str
@@ -141,6 +146,7 @@ class ConfigSpec:
     n_episodes: int | None = None
     lr_sweep: LRSweep | None = None
     paper: dict[str, float | list[float]] = field(default_factory=dict)
+    pool_with: str | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.lr_sweep, dict):  # as read from a sweep file
@@ -310,7 +316,7 @@ class Sweep:
         for spec in self.configs.values():
             if spec.group not in GROUPS:
                 raise SweepError(f"{where}: configuration {spec.name}: group {spec.group!r} is not one of {GROUPS}.")
-            for ref in (spec.checkpoint_from, spec.compare_to):
+            for ref in (spec.checkpoint_from, spec.compare_to, spec.pool_with):
                 if ref is not None and ref not in self.configs:
                     raise SweepError(f"{where}: configuration {spec.name} refers to unknown configuration {ref!r}.")
             if spec.checkpoint_from and (spec.train_args or spec.policy_overrides or spec.suite_overrides):
@@ -320,6 +326,8 @@ class Sweep:
                 )
             if spec.checkpoint_from and self.configs[spec.checkpoint_from].checkpoint_from:
                 raise SweepError(f"{where}: configuration {spec.name}: checkpoint_from must name a trained config.")
+            if spec.pool_with is not None:
+                self.validate_pool(spec, where)
             if spec.corruption is not None:
                 self.validate_corruption(spec, where)
             if spec.lr_sweep is not None:
@@ -339,6 +347,19 @@ class Sweep:
         for suite in self.settings.data:
             if not self.settings.datasets.get(suite, {}).get("root"):
                 raise SweepError(f"{where}: `data` makes {suite}'s dataset, so `datasets.{suite}` needs a `root`.")
+
+    def validate_pool(self, spec: ConfigSpec, where: Path) -> None:
+        target = self.configs[spec.pool_with]
+        problem = None
+        if target.name == spec.name or target.pool_with is not None:
+            problem = "must name a configuration that pools with none (the row that gathers the seeds)"
+        elif spec.compare_to and target.compare_to and self.configs[spec.compare_to].pool_with != target.compare_to:
+            problem = (f"its compare_to {spec.compare_to!r} must pool with {target.compare_to!r}, what "
+                       f"{target.name} compares to, so that the paired episodes pool")
+        elif bool(spec.compare_to) != bool(target.compare_to):
+            problem = f"both or neither of it and {target.name} need compare_to"
+        if problem:
+            raise SweepError(f"{where}: configuration {spec.name}: pool_with {spec.pool_with!r}: {problem}.")
 
     def validate_lr_sweep(self, spec: ConfigSpec, where: Path) -> None:
         problems = spec.lr_sweep.problems()
@@ -607,7 +628,9 @@ class Runner:
         """`plan.json`: every run of the sweep and its configuration, so the report can mark missing runs.
 
         The runs already planned in RUNS_DIR are kept (those of configurations the sweep file still has): a later
-        call restricted by `--seeds`, `--suites` or `--configs` adds its runs instead of replacing the plan. Only
+        call restricted by `--seeds`, `--suites` or `--configs` adds the runs it runs (with `--configs`, only those
+        configurations': `--configs X --seeds 1` plans no other configuration at seed 1) instead of replacing the
+        plan. Only
         the call's `configs` (all when None) are described afresh; the others keep their earlier descriptions, so a
         call with `--n-episodes` or `--steps` does not rewrite the protocol of configurations it does not run.
         """
@@ -680,7 +703,7 @@ class Runner:
         """Run (or skip) this shard's runs. Returns run keys by outcome: done, skipped, failed."""
         from tqdm import tqdm
 
-        self.write_plan(self.sweep.runs(), configs)
+        self.write_plan(self.sweep.runs(configs), configs)
         units = self.shard_units(configs, shard)
         outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": []}
         bar = tqdm(total=sum(len(r) for _, r in units), desc=f"sweep shard {shard[0]}/{shard[1]}", disable=not progress)
@@ -884,6 +907,7 @@ class Runner:
             "group": spec.group,
             "label": spec.label,
             "compare_to": spec.compare_to,
+            "pool_with": spec.pool_with,
             "branch": spec.branch,
             "corruption": spec.corruption,
             "eval_overrides": spec.eval_overrides,
