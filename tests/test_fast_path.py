@@ -95,3 +95,51 @@ def test_window_adam_is_torch_adam():
         theirs.grad = grad.clone()
         reference.step()
         assert torch.equal(ours, theirs.detach())
+
+
+def test_carried_window_adam_is_torch_adam_per_row():
+    """er_adam_state="carried": each window row continues its own moments and step count, exactly as a
+    torch.optim.Adam that has optimised that row alone for as many steps."""
+    g = torch.Generator().manual_seed(4)
+    history = [3, 1, 0]  # iterations each row has had before (the newest row: none)
+    references = []
+    for n in history:
+        param = torch.randn(2, 8, generator=g).requires_grad_(True)
+        adam = torch.optim.Adam([param], lr=0.05)
+        for _ in range(n):
+            param.grad = torch.randn(param.shape, generator=g)
+            adam.step()
+        references.append((param, adam))
+    ours = torch.stack([p.detach().clone() for p, _ in references])
+    state = [adam.state.get(p) for p, adam in references]
+    exp_avg = torch.stack([s["exp_avg"] if s else torch.zeros(2, 8) for s in state])
+    exp_avg_sq = torch.stack([s["exp_avg_sq"] if s else torch.zeros(2, 8) for s in state])
+    window = WindowAdam(ours, lr=0.05, exp_avg=exp_avg, exp_avg_sq=exp_avg_sq, rows_steps=torch.tensor(history))
+    for _ in range(3):
+        grad = torch.randn(ours.shape, generator=g)
+        window.step(grad)
+        for (param, adam), row_grad in zip(references, grad.unbind(0), strict=True):
+            param.grad = row_grad.clone()
+            adam.step()
+        # The bias corrections are computed as tensors here, as Python floats in torch's Adam: fp32 rounding.
+        torch.testing.assert_close(ours, torch.stack([p.detach() for p, _ in references]), rtol=0, atol=1e-5)
+
+
+def test_carried_adam_state_slides_with_the_window():
+    """Carried moments and counts stay one per window step through the slide; the newest step starts from zero;
+    the actions stay finite and differ from the fresh Adam's."""
+    config = dataclasses.replace(PredVLAConfig(device="cpu"), er_window=3, er_iterations=2, er_adam_state="carried")
+    model = randomised_model(config)
+    language, obs = control_stream(config, batch=2, steps=5)
+    er = ErrorRegression(model)
+    carried = torch.stack([er(language, v, q) for v, q in obs])
+    assert er.adam_steps == [6, 4, 2] and len(er.adam_exp_avg) == len(er.posteriors) == 3
+    assert all(m.shape == p.shape for m, p in zip(er.adam_exp_avg_sq, er.posteriors, strict=True))
+    model.config = dataclasses.replace(config, er_adam_state="fresh")
+    fresh_er = ErrorRegression(model)
+    fresh = torch.stack([fresh_er(language, v, q) for v, q in obs])
+    assert fresh_er.adam_steps == [] and torch.isfinite(carried).all()
+    torch.testing.assert_close(carried[0], fresh[0])  # one control step: no history to carry yet
+    assert not torch.allclose(carried[-1], fresh[-1])
+    with pytest.raises(ValueError, match="er_adam_state"):
+        PredVLAConfig(device="cpu", er_adam_state="kept")

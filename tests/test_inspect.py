@@ -145,7 +145,7 @@ def test_er_variants_replay_other_inference_settings(trained, tmp_path, capsys):
 
 @pytest.mark.parametrize("flags", [["--er-variant", "er_lr"], ["--er-variant", "tau=2"],
                                    ["--er-variant", "er_iterations=0"], ["--er-variant", "er_lr=fast"],
-                                   ["--er-variant", "er_lr=0.1", "--no-er"]])
+                                   ["--er-variant", "er_adam_state=kept"], ["--er-variant", "er_lr=0.1", "--no-er"]])
 def test_inspect_refuses_a_bad_er_variant(tmp_path, capsys, flags):
     assert main(["inspect", str(tmp_path), *flags]) == 2
     assert "--er-variant" in capsys.readouterr().err

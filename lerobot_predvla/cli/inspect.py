@@ -47,7 +47,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-er", action="store_true", help="skip the error-regression replay (the slow part)")
     p.add_argument("--er-variant", action="append", default=[], metavar="KEY=VALUE[,KEY=VALUE]",
                    help="also replay error regression with these inference settings, one variant per flag "
-                        "(keys: er_window, er_iterations, er_lr, er_complexity_weight, er_lambda_v, er_lambda_q)")
+                        "(keys: er_window, er_iterations, er_lr, er_adam_state (fresh or carried), "
+                        "er_complexity_weight, er_lambda_v, er_lambda_q)")
     p.add_argument("--every", type=int, default=None, metavar="N",
                    help="with a lerobot-train output directory: inspect only the checkpoints whose step is a multiple "
                         "of N, and the last one (default: every checkpoint)")

@@ -15,6 +15,7 @@ LONG_HORIZON_SEQUENCE_LENGTH = 500
 CORRUPTION_CHANNELS = ("vision", "proprio")
 RECURRENCE_BACKENDS = ("auto", "python", "cpp")
 COMPLEXITY_REDUCTIONS = ("sum", "mean")  # training C of Eq. 10: summed over the sequence, or its mean
+ER_ADAM_STATES = ("fresh", "carried")  # error regression's Adam: afresh per control step, or per posterior
 # Table 2 enables gradient clipping without a value; this one binds only on spikes (see `grad_clip_norm`).
 GRAD_CLIP_NORM = 100.0
 PREDVLA_PAPER_PARAMETERS = 675_732  # Table 1, at the paper's LIBERO layout (2 cameras, proprio 9, action 7)
@@ -109,6 +110,11 @@ class PredVLAConfig(CachedFeaturesConfig):
             it was never trained (`predvla inspect` warns and compares step sizes with `--er-variant er_lr=...`;
             docs/research/table2.md: on Table 2's own checkpoint 0.05 does; 0.002 halves the action error on
             replayed demonstrations without more successes in the simulator on the episodes evaluated).
+        er_adam_state: Whether error regression's Adam starts afresh at every control step ("fresh", the default)
+            or each window posterior continues the moments and step count of the control steps it was already
+            optimised in ("carried"; the newest starts from zero). Table 2 names Adam but not which; fresh kicks
+            every posterior of the window by about `er_lr` at each control step's first iteration, carried only
+            the newest (docs/paper.md, "Choices the paper leaves open").
         er_complexity_weight: w_ER, the complexity weight of every module during error regression
             (Table 2: 1.0).
         er_lambda_v: Visual prediction-error weight during error regression (1; 0 is ablation A4).
@@ -168,6 +174,7 @@ class PredVLAConfig(CachedFeaturesConfig):
     er_iterations: int = 10
     er_deadline_ms: float | None = None
     er_lr: float = 0.05
+    er_adam_state: str = "fresh"
     er_complexity_weight: float = 1.0
     er_lambda_v: float = 1.0
     er_lambda_q: float = 1.0
@@ -205,6 +212,8 @@ class PredVLAConfig(CachedFeaturesConfig):
             raise ValueError(
                 f"`er_window` must be >= 1 and `er_iterations` >= 0, got {self.er_window}, {self.er_iterations}."
             )
+        if self.er_adam_state not in ER_ADAM_STATES:
+            raise ValueError(f"`er_adam_state` must be one of {ER_ADAM_STATES}, got {self.er_adam_state!r}.")
         if self.er_deadline_ms is not None and self.er_deadline_ms <= 0:
             raise ValueError(f"`er_deadline_ms` must be > 0 milliseconds (or None), got {self.er_deadline_ms}.")
         if self.er_corruption_channel not in (None, *CORRUPTION_CHANNELS):

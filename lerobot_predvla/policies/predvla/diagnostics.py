@@ -30,7 +30,7 @@ from torch import Tensor
 
 from lerobot_predvla.utils.io import atomic_write_json
 
-from .configuration_predvla import MODULE_NAMES
+from .configuration_predvla import ER_ADAM_STATES, MODULE_NAMES
 from .error_regression import ErrorRegression
 from .modeling_predvla import PredVLAPolicy, refresh_mask, term_weights, training_terms
 from .posterior_store import POSTERIOR_STORE_FILE
@@ -267,12 +267,12 @@ def gap_over_training(er: dict, posteriors: dict) -> dict[str, float]:
 
 # Inference settings an offline replay may vary (Table 2's "Online error regression" rows and the A4/A5 weights).
 ER_SETTINGS = {"er_window": int, "er_iterations": int, "er_lr": float, "er_complexity_weight": float,
-               "er_lambda_v": float, "er_lambda_q": float}
+               "er_lambda_v": float, "er_lambda_q": float, "er_adam_state": str}
 
 
-def parse_er_variant(text: str) -> dict[str, int | float]:
+def parse_er_variant(text: str) -> dict[str, int | float | str]:
     """`KEY=VALUE[,KEY=VALUE]` of `ER_SETTINGS` -> typed overrides; ValueError naming what is wrong."""
-    overrides: dict[str, int | float] = {}
+    overrides: dict[str, int | float | str] = {}
     for item in text.split(","):
         key, sep, value = item.strip().partition("=")
         if not sep or key not in ER_SETTINGS:
@@ -283,6 +283,11 @@ def parse_er_variant(text: str) -> dict[str, int | float]:
         except ValueError:
             raise ValueError(f"--er-variant {text!r}: {key} needs a {ER_SETTINGS[key].__name__}, "
                              f"got {value!r}.") from None
+        if key == "er_adam_state":
+            if value not in ER_ADAM_STATES:
+                raise ValueError(f"--er-variant {text!r}: er_adam_state must be one of {ER_ADAM_STATES}, "
+                                 f"got {value!r}.")
+            continue
         if not overrides[key] > 0 and key in ("er_window", "er_iterations", "er_lr"):
             raise ValueError(f"--er-variant {text!r}: {key} must be positive (er_iterations=0 is the open loop "
                              "that every replay already reports).")
@@ -292,7 +297,7 @@ def parse_er_variant(text: str) -> dict[str, int | float]:
 
 
 def replay_er_variant(policy: PredVLAPolicy, data: TaskData, episodes: list[int],
-                      overrides: dict[str, int | float]) -> dict:
+                      overrides: dict[str, int | float | str]) -> dict:
     """`er_summary` of error regression replayed with other inference settings; the config is restored after."""
     saved = {key: getattr(policy.config, key) for key in overrides}
     try:

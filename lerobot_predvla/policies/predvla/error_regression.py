@@ -2,8 +2,9 @@
 
 At each control step: append the observation, initialise the newest posteriors from their priors
 (Eqs. 1-2), run `er_iterations` Adam steps on the window's posteriors against the free energy (Eq. 9)
-with the network frozen, regenerating the states from the window start after each update, and decode
-the action from A_bottom. With zero iterations no observation is ever read: exact open loop.
+(Adam afresh at every control step, or continuing each posterior's moments: `er_adam_state`) with the network
+frozen, regenerating the states from the window start after each update, and decode the action from A_bottom.
+With zero iterations no observation is ever read: exact open loop.
 
 With a time budget (`er_deadline_ms`), a control step runs as many of the `er_iterations` as fit in the budget
 from the step's start, at least one: the next iteration runs only if the mean time of those already run still
@@ -42,12 +43,22 @@ def frozen(model: PredictiveModel) -> Iterator[None]:
 class WindowAdam:
     """`torch.optim.Adam` (default betas and eps, no weight decay) on the window's posteriors, the same
     arithmetic as its single-tensor update, without the optimizer's per-step bookkeeping (hooks, state dicts,
-    profiler records), which costs more than the update itself on a window at batch 1."""
+    profiler records), which costs more than the update itself on a window at batch 1.
 
-    def __init__(self, param: Tensor, lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8):
+    Fresh (default): zero moments and one step count for the whole window. Carried (`er_adam_state="carried"`):
+    each window row (control step) continues from its own moments and step count, `rows_steps` (window,), so its
+    bias correction is Adam's for that row's history; `torch.optim.Adam` run on each row alone takes the same steps.
+    """
+
+    def __init__(self, param: Tensor, lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8,
+                 exp_avg: Tensor | None = None, exp_avg_sq: Tensor | None = None, rows_steps: Tensor | None = None):
         self.param, self.lr, self.betas, self.eps = param, lr, betas, eps
-        self.exp_avg, self.exp_avg_sq = torch.zeros_like(param), torch.zeros_like(param)
+        self.exp_avg = torch.zeros_like(param) if exp_avg is None else exp_avg.clone()
+        self.exp_avg_sq = torch.zeros_like(param) if exp_avg_sq is None else exp_avg_sq.clone()
         self.steps = 0
+        # Per-row step counts, shaped to broadcast over the row's (batch, latent) entries.
+        self.rows_steps = None if rows_steps is None else rows_steps.to(param.dtype).reshape(
+            -1, *[1] * (param.dim() - 1))
 
     @torch.no_grad()
     def step(self, grad: Tensor) -> None:
@@ -55,9 +66,15 @@ class WindowAdam:
         self.steps += 1
         self.exp_avg.lerp_(grad, 1 - beta1)
         self.exp_avg_sq.mul_(beta2).addcmul_(grad, grad, value=1 - beta2)
-        bias_correction2_sqrt = (1 - beta2**self.steps) ** 0.5
+        if self.rows_steps is None:
+            bias_correction2_sqrt = (1 - beta2**self.steps) ** 0.5
+            denom = (self.exp_avg_sq.sqrt() / bias_correction2_sqrt).add_(self.eps)
+            self.param.addcdiv_(self.exp_avg, denom, value=-self.lr / (1 - beta1**self.steps))
+            return
+        self.rows_steps += 1
+        bias_correction2_sqrt = (1 - beta2**self.rows_steps).sqrt()
         denom = (self.exp_avg_sq.sqrt() / bias_correction2_sqrt).add_(self.eps)
-        self.param.addcdiv_(self.exp_avg, denom, value=-self.lr / (1 - beta1**self.steps))
+        self.param.addcdiv_(self.exp_avg * (-self.lr / (1 - beta1**self.rows_steps)), denom)
 
 
 @dataclass
@@ -104,6 +121,10 @@ class ErrorRegression:
         self.start_state: RecurrentState | None = None  # state before the window's first step
         self.state: RecurrentState | None = None  # state at the newest step
         self.posteriors: list[Tensor] = []  # one (batch, 4r) tensor per window step
+        # er_adam_state="carried": each window step's Adam moments and iterations so far (empty when fresh).
+        self.adam_exp_avg: list[Tensor] = []
+        self.adam_exp_avg_sq: list[Tensor] = []
+        self.adam_steps: list[int] = []
         self.vision: list[Tensor] = []
         self.proprio: list[Tensor] = []
         # Per step, (batch,) weights of the prediction errors: 1 where the observation counts, 0 where it is
@@ -167,6 +188,10 @@ class ErrorRegression:
         vision_ok = ones if vision_available is None else vision_available
         proprio_ok = ones if proprio_available is None else proprio_available
         self.posteriors.append(prior)
+        if cfg.er_adam_state == "carried":
+            self.adam_exp_avg.append(torch.zeros_like(prior))
+            self.adam_exp_avg_sq.append(torch.zeros_like(prior))
+            self.adam_steps.append(0)
         self.vision.append(vision)
         self.proprio.append(proprio)
         self.vision_weight.append((vision_ok & fresh).to(vision.dtype))
@@ -174,8 +199,10 @@ class ErrorRegression:
         if len(self.posteriors) > cfg.er_window:  # slide: the oldest posterior is final
             with torch.no_grad():
                 self.start_state = self.rollout(self.start_state, self.lang_term, self.posteriors[0][None]).final
-            for buffer in (self.posteriors, self.vision, self.proprio, self.vision_weight, self.proprio_weight):
-                del buffer[0]
+            for buffer in (self.posteriors, self.vision, self.proprio, self.vision_weight, self.proprio_weight,
+                           self.adam_exp_avg, self.adam_exp_avg_sq, self.adam_steps):
+                if buffer:
+                    del buffer[0]
         return None
 
     def window_free_energy(self) -> Tensor:
@@ -189,7 +216,10 @@ class ErrorRegression:
         `er_deadline_ms`, only those that fit in the budget from `started` (default: now), at least one."""
         before = torch.stack(self.posteriors)
         c_q = before.clone().requires_grad_(True)
-        adam = WindowAdam(c_q, self.config.er_lr)
+        carried = self.config.er_adam_state == "carried"
+        adam = WindowAdam(c_q, self.config.er_lr, **({
+            "exp_avg": torch.stack(self.adam_exp_avg), "exp_avg_sq": torch.stack(self.adam_exp_avg_sq),
+            "rows_steps": torch.tensor(self.adam_steps)} if carried else {}))
         budget = self.config.er_deadline_ms
         started = time.perf_counter() if started is None else started
         begin, done = time.perf_counter(), 0
@@ -208,6 +238,11 @@ class ErrorRegression:
             self.reverted += int(diverged.sum())
             c_q = torch.where(diverged[None, :, None], before, c_q)
         self.posteriors = list(c_q.unbind(0))
+        if carried:  # a reverted environment keeps the moments it had before the step
+            keep = diverged[None, :, None]
+            self.adam_exp_avg = list(torch.where(keep, torch.stack(self.adam_exp_avg), adam.exp_avg).unbind(0))
+            self.adam_exp_avg_sq = list(torch.where(keep, torch.stack(self.adam_exp_avg_sq), adam.exp_avg_sq).unbind(0))
+            self.adam_steps = [n + done for n in self.adam_steps]
 
     def act(self) -> Tensor:
         """Step 3: regenerate the window from the updated posteriors and decode the action from A_bottom."""
