@@ -104,12 +104,13 @@ class PredVLAConfig(CachedFeaturesConfig):
             it runs as many of the `er_iterations` as fit, at least one, and logs how many it ran
             (docs/robot.md measures what each budget sustains on 2 CPU cores and what it costs in success: 2 of 10
             iterations succeeded less often than exact open loop).
-        er_lr: Adam step size eta of error regression (Table 2: 0.05). Adam starts afresh at every control step,
-            so its first iteration moves every posterior coordinate in the window by about eta: on a checkpoint whose
-            training posteriors sit closer to their priors than that, error regression drives the action head where
-            it was never trained (`predvla inspect` warns and compares step sizes with `--er-variant er_lr=...`;
-            docs/research/table2.md: on Table 2's own checkpoint 0.05 does; 0.002 halves the action error on
-            replayed demonstrations without more successes in the simulator on the episodes evaluated).
+        er_lr: Adam step size eta of error regression (Table 2: 0.05). With Adam afresh at every control step
+            (`er_adam_state="fresh"`) its first iteration moves every posterior coordinate in the window by about
+            eta: on a checkpoint whose training posteriors sit closer to their priors than that, error regression
+            drives the action head where it was never trained (`predvla inspect` warns and compares step sizes with
+            `--er-variant er_lr=...`; docs/research/table2.md: on Table 2's own checkpoint 0.05 does; 0.002 halves
+            the action error on replayed demonstrations without more successes in the simulator on the episodes
+            evaluated).
         er_adam_state: Whether error regression's Adam starts afresh at every control step ("fresh", the default)
             or each window posterior continues the moments and step count of the control steps it was already
             optimised in ("carried"; the newest starts from zero). Table 2 names Adam but not which; fresh kicks
