@@ -176,7 +176,8 @@ def print_summary(report: dict) -> None:
             module = max(ratio, key=ratio.get)
             print(f"error regression puts the posteriors up to {ratio[module]:.0f}x further from their priors than the "
                   f"training posteriors ({module}), where the action head was never trained: Adam's first iteration "
-                  f"moves every coordinate by er_lr; try a smaller one (--er-variant er_lr=...)")
+                  f"moves every coordinate by er_lr; compare a smaller one or Adam's moments carried over the "
+                  f"window (--er-variant er_lr=..., --er-variant er_adam_state=carried)")
         if report.get("error_regression_variants"):
             print_er_variants(er, report["error_regression_variants"])
 
