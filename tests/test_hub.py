@@ -233,3 +233,16 @@ def test_push_refuses_another_plugins_checkpoint_in_one_line(tmp_path, capsys):
     assert predvla_main(["push", str(tmp_path), "someone/act", "--dry-run"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "policy type 'act' is not one of this plugin's" in err
+
+
+def test_card_names_an_inference_override_that_config_json_predates():
+    """An evaluation override of a field that an older `config.json` lacks is compared with the field's default
+    (what that config loads as), so the card's records table names it instead of "as in config.json"."""
+    from lerobot_predvla.hub.publish import inference_settings
+
+    config = {"type": "predvla", "er_lr": 0.05, "er_iterations": 10}  # saved before er_adam_state existed
+    record = {"commands": {"train": ["lerobot-train", "--policy.type=predvla"]}}
+    assert inference_settings({**record, "eval_overrides": {"er_adam_state": "carried"}}, config) == {
+        "er_adam_state": "carried"}
+    assert inference_settings({**record, "eval_overrides": {"er_adam_state": "fresh"}}, config) == {}
+    assert inference_settings({**record, "eval_overrides": {"er_iterations": 0}}, config) == {"er_iterations": 0}

@@ -169,16 +169,21 @@ def differs(value, default) -> bool:
         return str(value) != str(default)
 
 
-def config_departures(values: dict) -> list[str]:
-    """`field = value (Table 2: default)` for every recipe field of a policy config (`config.json`, or `--policy.*`
-    values with `type`) that differs from its config class's default (PredVLA's are Table 2's, but for the values
-    Table 2 does not give)."""
+def config_defaults(policy_type: str) -> dict:
+    """The default of every field of a policy type's config class (PredVLA's are Table 2's)."""
     from lerobot.configs.policies import PreTrainedConfig
 
     import lerobot_predvla  # noqa: F401  (registers the plugin's config classes)
 
-    config_cls = PreTrainedConfig.get_choice_class(values["type"])
-    defaults = {f.name: f.default for f in fields(config_cls) if f.default is not MISSING_DEFAULT}
+    config_cls = PreTrainedConfig.get_choice_class(policy_type)
+    return {f.name: f.default for f in fields(config_cls) if f.default is not MISSING_DEFAULT}
+
+
+def config_departures(values: dict) -> list[str]:
+    """`field = value (Table 2: default)` for every recipe field of a policy config (`config.json`, or `--policy.*`
+    values with `type`) that differs from its config class's default (PredVLA's are Table 2's, but for the values
+    Table 2 does not give)."""
+    defaults = config_defaults(values["type"])
     paper = values["type"] == "predvla"
 
     def reference(k: str) -> str:

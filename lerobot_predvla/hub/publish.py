@@ -339,13 +339,15 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None, co
 
 def inference_settings(record: dict, config: dict) -> dict:
     """The policy fields a recorded evaluation ran with that differ from the published `config.json`: the recorded
-    training's `--policy.*` values (the checkpoint it evaluated) under the evaluation's overrides."""
-    from lerobot_predvla.experiments.headline import NOT_RECIPE, differs
+    training's `--policy.*` values (the checkpoint it evaluated) under the evaluation's overrides. A field that
+    `config.json` lacks (saved before the field existed) loads as its default, so it is compared with that."""
+    from lerobot_predvla.experiments.headline import NOT_RECIPE, config_defaults, differs
 
     train = (record.get("commands") or {}).get("train") or []
     fields = dict(w[len("--policy."):].split("=", 1) for w in train if w.startswith("--policy.") and "=" in w)
     fields.update(record.get("eval_overrides") or {})
-    return {k: v for k, v in fields.items() if k in config and k not in NOT_RECIPE and differs(v, config[k])}
+    loaded = {**config_defaults(config["type"]), **config} if "type" in config else config
+    return {k: v for k, v in fields.items() if k in loaded and k not in NOT_RECIPE and differs(v, loaded[k])}
 
 
 def _records_section(records: list[dict], config: dict) -> str:
