@@ -13,6 +13,9 @@ A configuration with `compare_to` (e.g. exact open loop against error regression
 episode, from the runs' `eval_info.json` files: both runs of a seed start from the same init states when they share
 the evaluation seed, reset mode and protocol, so each episode is a pair. The report counts the pairs that succeed
 in only one of the two and gives the exact two-sided sign test on them.
+
+Configurations that name another in `pool_with` (further training seeds of the same model and evaluation) also
+get one row over the union of their seeds, and their paired episodes one sign test over all the seeds' pairs.
 """
 
 import json
@@ -168,7 +171,7 @@ class Results:
         """Each configuration that others name in `pool_with`, with them: `{target: [target, *members]}`."""
         pools: dict[str, list[str]] = {}
         for name, c in self.configs.items():
-            if c.get("pool_with"):
+            if c.get("pool_with") in self.configs:  # a target neither planned nor recorded has no row to join
                 pools.setdefault(c["pool_with"], [c["pool_with"]]).append(name)
         return pools
 
