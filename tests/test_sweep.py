@@ -208,6 +208,12 @@ def test_seeds_flag_keeps_a_configurations_own_seeds_only_where_they_overlap(tmp
         assert sorted(r.seed for r in runs if r.config == name) == own
         assert sorted(r.seed for r in runs if r.config == "predvla") == (seeds or [0])
 
+    Runner(Sweep.load(path), tmp_path / "runs", execute=FakeLeRobot()).run(configs=[name], progress=False)
+    later = Sweep.load(path)
+    apply_flags(later, cli_flags(seeds=[1]))  # a later call for one of its seeds: the plan still names both
+    Runner(later, tmp_path / "runs", execute=FakeLeRobot()).run(configs=[name], progress=False)
+    assert json.loads((tmp_path / "runs/plan.json").read_text())["configs"][name]["seeds"] == [1, 2]
+
 
 def test_suites_flag_keeps_a_configurations_own_suites_only_where_they_overlap(tmp_path):
     """L3 names only libero_object: `--suites libero_spatial` runs it nowhere rather than on a suite it never named;

@@ -630,9 +630,10 @@ class Runner:
         The runs already planned in RUNS_DIR are kept (those of configurations the sweep file still has): a later
         call restricted by `--seeds`, `--suites` or `--configs` adds the runs it runs (with `--configs`, only those
         configurations': `--configs X --seeds 1` plans no other configuration at seed 1) instead of replacing the
-        plan. Only
-        the call's `configs` (all when None) are described afresh; the others keep their earlier descriptions, so a
-        call with `--n-episodes` or `--steps` does not rewrite the protocol of configurations it does not run.
+        plan. Only the call's `configs` (all when None) are described afresh; the others keep their earlier
+        descriptions, so a call with `--n-episodes` or `--steps` does not rewrite the protocol of configurations it
+        does not run. A configuration's own seeds, narrowed by `--seeds`, are described with the seeds planned
+        before (as its runs are kept).
         """
         path = self.runs_dir / "plan.json"
         try:
@@ -644,10 +645,18 @@ class Runner:
                              "delete it to plan from the sweep file alone") from err
         runs = planned + [r for r in runs if r not in planned]
         fresh = set(configs or self.sweep.configs)
+
+        def describe(name: str, spec: ConfigSpec) -> dict:
+            if name not in fresh and name in described:
+                return described[name]
+            earlier_seeds = described.get(name, {}).get("seeds")
+            if spec.seeds is None or not earlier_seeds:
+                return asdict(spec)
+            return {**asdict(spec), "seeds": sorted(set(spec.seeds) | set(earlier_seeds))}
+
         atomic_write_json(path, {
             "runs": [asdict(r) for r in runs],
-            "configs": {name: asdict(spec) if name in fresh or name not in described else described[name]
-                        for name, spec in self.sweep.configs.items()},
+            "configs": {name: describe(name, spec) for name, spec in self.sweep.configs.items()},
             "protocol": earlier["protocol"] if configs and "protocol" in earlier else {
                 "n_episodes": self.sweep.settings.n_episodes, "episode_length": self.sweep.settings.episode_length},
         })
