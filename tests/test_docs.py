@@ -47,11 +47,12 @@ def test_headline_cells_are_the_report_json_seeds():
         assert f"| {cell['mean']:.1f} (n = 1) |" in row
     for path in (REPO / README, REPO / RESULTS_DOC):
         assert "± 0.0" not in _block(path) and "± 0.00" not in _block(path)
-    seeds = {}
+    seeds = {}  # the lambda_q = 100 row: seed 0 and the seeds 1-2 that pool with it (pool_with)
     wrist = json.loads((REPO / "results/libero_object_cpu_init_noise_wrist/report.json").read_text())["configs"]
     for name in ("predvla_cpu_8k_lambda_q100_er_lambda_q1_full", "predvla_cpu_8k_lambda_q100_seeds_er_lambda_q1"):
         seeds.update(wrist[name]["suites"]["libero_object"]["seeds"])
     mean = sum(seeds.values()) / len(seeds)
+    assert len(seeds) == 3
     assert f"{mean:.1f} ± " in _block(REPO / README) and f"(n = {len(seeds)})" in _block(REPO / README)
 
 
@@ -61,7 +62,8 @@ def _record(config: str, seed: int, successes: int, episodes: int = 500) -> dict
 
 
 def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
-    """The Table 2 row appears first as soon as results/libero_object_table2/report.json exists, its seeds merged."""
+    """The Table 2 row appears first as soon as results/libero_object_table2/report.json exists, with the seeds of
+    the configurations that pool with its columns' (`pool_with`, as report.json lists them)."""
     for name in ("configs", "results/libero_object_cpu/runs/records"):
         shutil.copytree(REPO / name, tmp_path / name)
     shutil.copy(REPO / "results/libero_object_cpu/report.json", tmp_path / "results/libero_object_cpu/report.json")
@@ -81,7 +83,8 @@ def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
                           _record(config, seed, successes))
         configs.setdefault(config, {"suites": {"libero_object": {"seeds": {}}}})
         configs[config]["suites"]["libero_object"]["seeds"][str(seed)] = successes / 5
-    atomic_write_json(table2 / "report.json", {"configs": configs})
+    atomic_write_json(table2 / "report.json", {"configs": configs, "pooled": {
+        "predvla_table2": {"configs": ["predvla_table2", "predvla_table2_seeds"]}}})
     update_docs(tmp_path)
     rows = [line for line in _block(tmp_path / README).splitlines() if line.startswith("| [")]
     assert "results/libero_object_table2/report.md" in rows[0]

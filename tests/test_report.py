@@ -238,6 +238,10 @@ def test_pooled_configurations_gather_their_seeds_and_paired_episodes(tmp_path):
     text = (tmp_path / "report" / "report.md").read_text()
     main = text.split("## Main results")[1].split("\n## ")[0]
     assert f"| er, pooled seeds (er + er_seeds) | — | {cell['mean']:.2f} ± {cell['std']:.2f} |" in main
+    ablations = text.split("## Ablations")[1].split("\n## ")[0]
+    ol = summary["pooled"]["ol"]["suites"]["libero_object"]  # seeds 0-2: 3/8, 3/4, 3/4
+    assert ol["mean"] == pytest.approx(np.mean([37.5, 75.0, 75.0]))
+    assert f"|  | ol, pooled seeds (ol + ol_seeds) | {ol['mean']:.2f} ± {ol['std']:.2f} |" in ablations
     assert "| ol + ol_seeds | er + er_seeds | object | 0, 1, 2 | 16 | 9 / 11 | 2 / 4 | 0.688 |" in text
 
 

@@ -599,10 +599,12 @@ def test_evaluation_parts_run_in_parallel_workers_with_their_own_logs(tmp_path):
 def test_pool_with_names_a_pool_whose_paired_episodes_pool_too(tmp_path):
     """Seeds 1-2 of error regression and open loop pool with seed 0's: accepted; a pool whose comparisons would
     not pool, a chain of pools or an unknown name is refused, naming the configuration."""
-    er, ol = {"name": "predvla"}, {"name": "A6", "checkpoint_from": "predvla", "compare_to": "predvla"}
+    open_loop = {"er_iterations": 0}
+    er = {"name": "predvla"}
+    ol = {"name": "A6", "checkpoint_from": "predvla", "compare_to": "predvla", "eval_overrides": open_loop}
     er_seeds = {"name": "er_seeds", "checkpoint_from": "predvla", "seeds": [1], "pool_with": "predvla"}
     ol_seeds = {"name": "ol_seeds", "checkpoint_from": "predvla", "seeds": [1], "compare_to": "er_seeds",
-                "pool_with": "A6"}
+                "pool_with": "A6", "eval_overrides": open_loop}
     sweep = Sweep.load(sweep_file(tmp_path, configs=[er, ol, er_seeds, ol_seeds]))
     assert sweep.configs["ol_seeds"].pool_with == "A6"
     unpooled_reference = {**er_seeds, "pool_with": None}
@@ -613,7 +615,12 @@ def test_pool_with_names_a_pool_whose_paired_episodes_pool_too(tmp_path):
                                          "that pools with none"):
         Sweep.load(sweep_file(tmp_path, configs=[er, er_seeds, {**er_seeds, "name": "chained",
                                                                 "pool_with": "er_seeds"}]))
-    with pytest.raises(SweepError, match="both or neither"):
-        Sweep.load(sweep_file(tmp_path, configs=[er, ol, {**er_seeds, "pool_with": "A6"}]))
+    with pytest.raises(SweepError, match="configuration er_seeds: pool_with 'A6': it must evaluate the model"):
+        Sweep.load(sweep_file(tmp_path, configs=[er, ol, {**er_seeds, "pool_with": "A6"}]))  # open loop's seeds
+    with pytest.raises(SweepError, match="configuration er_seeds: pool_with 'predvla': it must evaluate the model"):
+        Sweep.load(sweep_file(tmp_path, configs=[er, {**er_seeds, "init_states": False}]))
+    fast = {**er_seeds, "eval_overrides": {"recurrence_backend": "cpp"}}  # the same model, computed faster
+    ol_no_pairs = {**ol_seeds, "compare_to": None}  # seed 0's pairs alone then
+    assert Sweep.load(sweep_file(tmp_path, configs=[er, ol, fast, ol_no_pairs])).configs["ol_seeds"].pool_with == "A6"
     with pytest.raises(SweepError, match="unknown configuration 'nope'"):
         Sweep.load(sweep_file(tmp_path, configs=[er, {**er_seeds, "pool_with": "nope"}]))

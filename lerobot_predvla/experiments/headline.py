@@ -3,11 +3,11 @@
 Each row of `EXPERIMENTS` names a results directory (`results/<name>/`, written by `predvla report`), the sweep file
 that produced it and which of its configurations are PredVLA with error regression, PredVLA in exact open loop
 (`er_iterations = 0`), BC-RNN and BC-Transformer on the same demonstrations. A cell is the mean success over training
-seeds with the seed count (`n = 1` for a single seed, never `± 0`), merged over the listed configurations (one
-configuration may hold seed 0 and another seeds 1-2). The departures from the paper's protocol are read from the sweep
-file (demonstrations, front end, training recipe against PredVLAConfig's Table 2 defaults) and from the run records
-(episodes per task, step cap, seeds). Rows whose report does not exist yet are left out, so a new experiment leads
-the table once its `report.json` is committed.
+seeds with the seed count (`n = 1` for a single seed, never `± 0`), over the seeds of the configuration's pool when
+other configurations extend it with further seeds (`pool_with`, as `predvla report` gathers them). The departures from
+the paper's protocol are read from the sweep file (demonstrations, front end, training recipe against PredVLAConfig's
+Table 2 defaults) and from the run records (episodes per task, step cap, seeds). Rows whose report does not exist yet
+are left out, so a new experiment leads the table once its `report.json` is committed.
 
 `predvla report --docs` rewrites the block between HEADLINE_START and HEADLINE_END in README.md (the summary table)
 and docs/results.md (the summary table and a per-seed table), and the configs and model card of every checkpoint
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_predvla.experiments.report import MISSING, SUMMARY_FILE, ReportError
-from lerobot_predvla.experiments.sweep import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
+from lerobot_predvla.experiments.sweep import NOT_RECIPE, PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
 from lerobot_predvla.libero.protocol import PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK
 from lerobot_predvla.utils.io import atomic_write_bytes
 
@@ -39,42 +39,37 @@ PAPER_OBJECT = {"error_regression": (89.24, 6.13, 14), "open_loop": (78.14, 4.53
                 "bc_rnn": (2.20, 2.27, None), "bc_transformer": (15.49, 12.15, None)}
 COLUMNS = (("error_regression", "PredVLA, error regression"), ("open_loop", "PredVLA, exact open loop"),
            ("bc_rnn", "BC-RNN"), ("bc_transformer", "BC-Transformer"))
-# Policy fields that say where or how fast a run computes, not what it computes.
-NOT_RECIPE = {"type", "push_to_hub", "device", "recurrence_backend", "use_amp", "repo_id"}
 # PredVLA defaults that Table 2 does not give a value for (the open choices of docs/paper.md).
 UNSTATED_IN_TABLE2 = {"grad_clip_norm"}
 
 
 @dataclass(frozen=True)
 class Experiment:
-    """One headline row: a results directory and the configurations of each column (several: disjoint seeds)."""
+    """One headline row: a results directory and the configuration of each column (None: not run there)."""
 
     results: str
     sweep: str
     recipe: str
-    error_regression: tuple[str, ...]
-    open_loop: tuple[str, ...]
-    bc_rnn: tuple[str, ...] = ()
-    bc_transformer: tuple[str, ...] = ()
+    error_regression: str
+    open_loop: str
+    bc_rnn: str | None = None
+    bc_transformer: str | None = None
 
 
 EXPERIMENTS = (
     Experiment("libero_object_table2", "configs/sweeps/libero_object_table2.yaml", "Table 2",
-               ("predvla_table2", "predvla_table2_seeds"),
-               ("predvla_table2_open_loop", "predvla_table2_seeds_open_loop"), ("B2",), ("B1",)),
+               "predvla_table2", "predvla_table2_open_loop", "B2", "B1"),
     Experiment("libero_object_cpu", "configs/sweeps/libero_object_cpu.yaml", "CPU recipe",
-               ("predvla_cpu_8k",), ("predvla_cpu_8k_open_loop",), ("B2",), ("B1",)),
+               "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1"),
     Experiment("libero_object_cpu_init_noise", "configs/sweeps/libero_object_cpu_init_noise.yaml", "CPU recipe",
-               ("predvla_cpu_8k",), ("predvla_cpu_8k_open_loop",), ("B2",), ("B1",)),
+               "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1"),
     Experiment("libero_object_cpu_init_noise_wrist", "configs/sweeps/libero_object_cpu_init_noise_wrist.yaml",
-               "CPU recipe", ("predvla_cpu_8k",), ("predvla_cpu_8k_open_loop",), ("B2",), ("B1",)),
+               "CPU recipe", "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1"),
     Experiment("libero_object_cpu_init_noise_wrist", "configs/sweeps/libero_object_cpu_init_noise_wrist.yaml",
-               "CPU recipe, lambda_q = 100",
-               ("predvla_cpu_8k_lambda_q100_er_lambda_q1_full", "predvla_cpu_8k_lambda_q100_seeds_er_lambda_q1"),
-               ("predvla_cpu_8k_lambda_q100_open_loop", "predvla_cpu_8k_lambda_q100_seeds_open_loop"),
-               ("B2",), ("B1",)),
+               "CPU recipe, lambda_q = 100", "predvla_cpu_8k_lambda_q100_er_lambda_q1_full",
+               "predvla_cpu_8k_lambda_q100_open_loop", "B2", "B1"),
     Experiment("libero_object_cpu_hold", "configs/sweeps/libero_object_cpu_hold.yaml", "CPU recipe, lambda_q = 100",
-               ("predvla_cpu_lambda_q100",), ("predvla_cpu_lambda_q100_open_loop",)),
+               "predvla_cpu_lambda_q100", "predvla_cpu_lambda_q100_open_loop"),
 )
 
 
@@ -121,9 +116,11 @@ def _records(results_dir: Path, config: str) -> dict[int, dict]:
     return out
 
 
-def _cell(results_dir: Path, summary: dict, configs: tuple[str, ...]) -> Cell:
+def _cell(results_dir: Path, summary: dict, config: str | None) -> Cell:
+    """`config`'s seeds, with those of the configurations that pool with it (the report checked them disjoint)."""
     rates, records = {}, {}
-    for config in configs:
+    pool = summary.get("pooled", {}).get(config, {}).get("configs", [config])
+    for config in pool:
         entry = summary["configs"].get(config)
         if entry is None:
             continue
@@ -131,8 +128,6 @@ def _cell(results_dir: Path, summary: dict, configs: tuple[str, ...]) -> Cell:
         found = _records(results_dir, config)
         for seed, rate in seeds.items():
             seed = int(seed)
-            if seed in rates:
-                raise ReportError(f"{results_dir / SUMMARY_FILE}: seed {seed} appears in two of {list(configs)}.")
             if seed not in found:
                 raise ReportError(f"{results_dir}/runs/records/{config}/{SUITE}/seed{seed}.json: missing run record.")
             rates[seed], records[seed] = float(rate), found[seed]
@@ -258,7 +253,7 @@ def build_rows(root: Path) -> list[Row]:
             continue
         demonstrations, departures = _demonstrations(sweep)
         protocol, protocol_departures = _protocol(cells)
-        departures += recipe_departures(sweep, exp.error_regression[0]) + protocol_departures
+        departures += recipe_departures(sweep, exp.error_regression) + protocol_departures
         rows.append(Row(exp, cells, demonstrations, departures, protocol))
     if not rows:
         raise ReportError(f"{root}/results: no report.json of {[e.results for e in EXPERIMENTS]}.")

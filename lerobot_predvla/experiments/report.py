@@ -362,9 +362,7 @@ def main_table(summary: dict) -> str | None:
     if "libero_10" in suites:
         header += ["long", "4-suite mean"]
     rows = []
-    # A pool's row (pool_with) follows the last of its configurations in the table.
-    last_of = {[n for n in names if n in pool["configs"]][-1]: target
-               for target, pool in summary.get("pooled", {}).items() if target in names}
+    last_of = _pools_after(summary, names)
     for n in names:
         c = summary["configs"][n]
         for label, params, cells in ((_label(summary, n), c["params"], c), *(
@@ -376,6 +374,12 @@ def main_table(summary: dict) -> str | None:
                 row += [fmt_cell(cells["suites"]["libero_10"]), fmt_num(cells["mean4"])]
             rows.append(row)
     return _table(header, rows)
+
+
+def _pools_after(summary: dict, names: list[str]) -> dict[str, str]:
+    """`{name: pool target}`: a pool's row (pool_with) follows the last of its configurations in a table of `names`."""
+    return {[n for n in names if n in pool["configs"]][-1]: target
+            for target, pool in summary.get("pooled", {}).items() if target in names}
 
 
 def _pooled_label(summary: dict, target: str) -> str:
@@ -448,6 +452,7 @@ def ablation_table(summary: dict) -> str | None:
         return None
     suites = summary["suites"]
     rows = []
+    last_of = _pools_after(summary, names)
     for n in names:
         c = summary["configs"][n]
         rows.append([n, _label(summary, n), *[fmt_cell(c["suites"][s]) for s in suites]])
@@ -457,6 +462,9 @@ def ablation_table(summary: dict) -> str | None:
             p = paired.get(s)
             deltas.append(MISSING if not p or p["n"] == 0 else f"{p['delta']:+.2f} (n={p['n']})")
         rows.append(["", f"  Δ vs {c.get('paired_against', MISSING)} (paired seeds)", *deltas])
+        if n in last_of:
+            pool = summary["pooled"][last_of[n]]
+            rows.append(["", _pooled_label(summary, last_of[n]), *[fmt_cell(pool["suites"][s]) for s in suites]])
     return _table(["", "Change from PredVLA", *[SUITE_LABELS[s] for s in suites]], rows)
 
 

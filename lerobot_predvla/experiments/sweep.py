@@ -54,6 +54,8 @@ GROUPS = ("main", "baseline", "ladder", "ablation", "corruption")
 CORRUPTION_SOURCE = {"libero_spatial": "libero_goal", "libero_goal": "libero_object",
                      "libero_object": "libero_spatial", "libero_10": "libero_spatial"}
 CORRUPTION_KEYS = {"channel", "alpha", "source_suite", "episode", "open_loop"}
+# Policy fields that say where or how fast a run computes, not what it computes.
+NOT_RECIPE = frozenset({"type", "push_to_hub", "device", "recurrence_backend", "use_amp", "repo_id"})
 TRAIN_DONE_FILE = "predvla_sweep_train.json"  # written beside a finished training's checkpoints
 EVAL_WALL_FILE = "predvla_sweep_eval.json"  # wall time of one evaluation part, beside its eval_info.json
 
@@ -67,6 +69,11 @@ class SweepError(ValueError):
 def eval_run_dir(runs_dir: Path, config: str, suite: str, seed: int) -> Path:
     """Where a run's evaluation writes: its eval_info.json, or one task part per subfolder."""
     return Path(runs_dir) / "eval" / config / suite / f"seed{seed}"
+
+
+def _recipe(fields: dict) -> dict:
+    """The policy fields of `fields` that change what is computed (NOT_RECIPE left out)."""
+    return {k: v for k, v in fields.items() if k not in NOT_RECIPE}
 
 
 def _as_args(values: dict, prefix: str) -> list[str]:
@@ -119,9 +126,10 @@ class ConfigSpec:
         paper: The paper's published success (%) of the same configuration per suite, `{libero_object: [89.24, 6.13]}`
             (mean and standard deviation over its seeds, or the mean alone); `predvla report` sets it beside ours.
         pool_with: The configuration this one extends with further training seeds (the same model and evaluation,
-            e.g. at fewer episodes per task): `predvla report` adds a row over the union of their seeds and pools
-            their paired episodes. With `compare_to` on both, this one's must pool with the other's (open loop on
-            seeds 1-2 against error regression on seeds 1-2 pools with open loop on seed 0 against error
+            e.g. at fewer episodes per task: the same trained configuration, `init_states` and `eval_overrides` but
+            for fields of where or how fast they compute): `predvla report` adds a row over the union of their seeds
+            and pools their paired episodes. With `compare_to` on both, this one's must pool with the other's (open
+            loop on seeds 1-2 against error regression on seeds 1-2 pools with open loop on seed 0 against error
             regression on seed 0).
     """
 
@@ -353,11 +361,15 @@ class Sweep:
         problem = None
         if target.name == spec.name or target.pool_with is not None:
             problem = "must name a configuration that pools with none (the row that gathers the seeds)"
+        elif ((spec.checkpoint_from or spec.name) != (target.checkpoint_from or target.name)
+              or _recipe(spec.eval_overrides) != _recipe(target.eval_overrides)
+              or spec.init_states != target.init_states):
+            problem = (f"it must evaluate the model {target.name} evaluates, as it does (checkpoint_from, "
+                       "eval_overrides but for where or how fast they compute, init_states)")
         elif spec.compare_to and target.compare_to and self.configs[spec.compare_to].pool_with != target.compare_to:
+            # One of them without compare_to is fine: the pool's paired episodes are then the other's alone.
             problem = (f"its compare_to {spec.compare_to!r} must pool with {target.compare_to!r}, what "
                        f"{target.name} compares to, so that the paired episodes pool")
-        elif bool(spec.compare_to) != bool(target.compare_to):
-            problem = f"both or neither of it and {target.name} need compare_to"
         if problem:
             raise SweepError(f"{where}: configuration {spec.name}: pool_with {spec.pool_with!r}: {problem}.")
 

@@ -341,7 +341,8 @@ def inference_settings(record: dict, config: dict) -> dict:
     """The policy fields a recorded evaluation ran with that differ from the published `config.json`: the recorded
     training's `--policy.*` values (the checkpoint it evaluated) under the evaluation's overrides. A field that
     `config.json` lacks (saved before the field existed) loads as its default, so it is compared with that."""
-    from lerobot_predvla.experiments.headline import NOT_RECIPE, config_defaults, differs
+    from lerobot_predvla.experiments.headline import config_defaults, differs
+    from lerobot_predvla.experiments.sweep import NOT_RECIPE
 
     train = (record.get("commands") or {}).get("train") or []
     fields = dict(w[len("--policy."):].split("=", 1) for w in train if w.startswith("--policy.") and "=" in w)
