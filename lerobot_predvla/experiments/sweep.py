@@ -27,6 +27,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
+from lerobot_predvla.experiments.logs import compact_log
 from lerobot_predvla.experiments.lr_selection import (
     CRITERION,
     PENDING_LR,
@@ -458,12 +459,14 @@ def parse_shard(text: str) -> tuple[int, int]:
 
 
 def subprocess_executor(command: list[str], log: Path) -> int:
-    """Run a command with stdout and stderr appended to `log`."""
+    """Run a command with stdout and stderr appended to `log`, then keep only its progress bars' last states."""
     log.parent.mkdir(parents=True, exist_ok=True)
     with log.open("a") as out:
         out.write(f"$ {' '.join(command)}\n")
         out.flush()
-        return subprocess.run(command, stdout=out, stderr=subprocess.STDOUT, check=False).returncode
+        code = subprocess.run(command, stdout=out, stderr=subprocess.STDOUT, check=False).returncode
+    compact_log(log)
+    return code
 
 
 def versions() -> dict[str, str]:
