@@ -56,24 +56,26 @@ def randomised_model(config: PredVLAConfig, seed: int = 0) -> PredictiveModel:
     return model
 
 
-def training_data(config: PredVLAConfig, batch: int, steps: int, seed: int = 0) -> dict[str, Tensor]:
-    """A synthetic batch of whole episodes, time-major, every step valid."""
+def training_data(config: PredVLAConfig, batch: int, steps: int, seed: int = 0,
+                  device: str = "cpu") -> dict[str, Tensor]:
+    """A synthetic batch of whole episodes, time-major, every step valid (drawn on the CPU, the same on any device)."""
     g = torch.Generator().manual_seed(seed)
-    return {
+    data = {
         "language": torch.randn(batch, config.language_dim, generator=g),
         "vision": torch.randn(steps, batch, config.vision_dim, generator=g),
         "state": torch.randn(steps, batch, config.proprio_dim, generator=g),
         "action": torch.rand(steps, batch, config.action_dim, generator=g) * 1.8 - 0.9,
         "c_q": 0.3 * torch.randn(steps, batch, 4 * config.latent_dim, generator=g),
     }
+    return {k: v.to(device) for k, v in data.items()}
 
 
 def training_loss(model: PredictiveModel, rollout: Callable, data: dict[str, Tensor], c_q: Tensor) -> Tensor:
     """Eq. 10, as `PredVLAPolicy.forward` computes it, with the given rollout."""
     cfg = model.config
     traj = rollout(model.initial_state(c_q.shape[1]), model.language_term(data["language"]), c_q)
-    steps = torch.arange(c_q.shape[0])[:, None].expand(c_q.shape[:2])
-    valid = torch.ones(c_q.shape[:2], dtype=torch.bool)
+    steps = torch.arange(c_q.shape[0], device=c_q.device)[:, None].expand(c_q.shape[:2])
+    valid = torch.ones(c_q.shape[:2], dtype=torch.bool, device=c_q.device)
     fresh = steps % cfg.visual_refresh_interval == 0
     eps_v, eps_q = model.prediction_errors(traj, data["vision"], data["state"])
     complexity = model.complexity(c_q, model.priors(traj), cfg.complexity_weights)
@@ -93,7 +95,7 @@ def train_step_fn(model: PredictiveModel, rollout: Callable, data: dict[str, Ten
     steps, batch, dim = data["c_q"].shape
     g = torch.Generator().manual_seed(0)
     if store is None:
-        store = PosteriorStore(batch, steps, dim, lr=cfg.posterior_lr)
+        store = PosteriorStore(batch, steps, dim, lr=cfg.posterior_lr).to(data["c_q"].device)
         store.latents.copy_(data["c_q"].transpose(0, 1))
     whole_batch = store.num_episodes == batch
     network = torch.optim.Adam(model.parameters(), lr=cfg.optimizer_lr, weight_decay=cfg.optimizer_weight_decay)
@@ -101,6 +103,7 @@ def train_step_fn(model: PredictiveModel, rollout: Callable, data: dict[str, Ten
     def step() -> float:
         network.zero_grad(set_to_none=True)
         episodes = torch.arange(batch) if whole_batch else torch.randint(store.num_episodes, (batch,), generator=g)
+        episodes = episodes.to(store.latents.device)
         loss = training_loss(model, rollout, data, store.gather(episodes))
         loss.backward()
         nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip_norm)
@@ -111,29 +114,32 @@ def train_step_fn(model: PredictiveModel, rollout: Callable, data: dict[str, Ten
     return step
 
 
-def bf16_step_fn(step: Callable[[], float]) -> Callable[[], float]:
-    """`step` under bfloat16 autocast, as `lerobot-train --policy.use_amp=true` takes it on the CPU (the recurrence's
+def bf16_step_fn(step: Callable[[], float], device: str = "cpu") -> Callable[[], float]:
+    """`step` under bfloat16 autocast, as `lerobot-train --policy.use_amp=true` takes it on `device` (the recurrence's
     loops and the heads in bfloat16, losses, posteriors and both Adams in float32)."""
 
     def bf16_step() -> float:
-        with torch.autocast("cpu", dtype=torch.bfloat16):
+        with torch.autocast(device, dtype=torch.bfloat16):
             return step()
 
     return bf16_step
 
 
-def control_stream(config: PredVLAConfig, batch: int, steps: int, seed: int = 0) -> tuple[Tensor, list]:
+def control_stream(config: PredVLAConfig, batch: int, steps: int, seed: int = 0,
+                   device: str = "cpu") -> tuple[Tensor, list]:
     g = torch.Generator().manual_seed(seed)
-    language = torch.randn(batch, config.language_dim, generator=g)
-    obs = [(torch.randn(batch, config.vision_dim, generator=g), torch.randn(batch, config.proprio_dim, generator=g))
-           for _ in range(steps)]
+    language = torch.randn(batch, config.language_dim, generator=g).to(device)
+    obs = [(torch.randn(batch, config.vision_dim, generator=g).to(device),
+            torch.randn(batch, config.proprio_dim, generator=g).to(device)) for _ in range(steps)]
     return language, obs
 
 
 def control_step_fn(model: PredictiveModel, rollout: Callable, batch: int, seed: int = 0) -> Callable[[], Tensor]:
-    """One error-regression control step on a full window (filled with observe-only steps beforehand)."""
+    """One error-regression control step on a full window (filled with observe-only steps beforehand), on the
+    model's device."""
     cfg = model.config
-    language, obs = control_stream(cfg, batch, cfg.er_window + 64, seed)
+    device = next(model.parameters()).device
+    language, obs = control_stream(cfg, batch, cfg.er_window + 64, seed, device)
     er = ErrorRegression(model, rollout)
     for vision, proprio in obs[: cfg.er_window]:
         er.observe(language, vision, proprio)
