@@ -119,17 +119,16 @@ def _records(results_dir: Path, config: str) -> dict[int, dict]:
 def _cell(results_dir: Path, summary: dict, config: str | None) -> Cell:
     """`config`'s seeds, with those of the configurations that pool with it (the report checked them disjoint)."""
     rates, records = {}, {}
-    pool = summary.get("pooled", {}).get(config, {}).get("configs", [config])
-    for config in pool:
-        entry = summary["configs"].get(config)
+    for name in summary.get("pooled", {}).get(config, {}).get("configs", [config]):
+        entry = summary["configs"].get(name)
         if entry is None:
             continue
         seeds = entry["suites"].get(SUITE, {}).get("seeds", {})
-        found = _records(results_dir, config)
+        found = _records(results_dir, name)
         for seed, rate in seeds.items():
             seed = int(seed)
             if seed not in found:
-                raise ReportError(f"{results_dir}/runs/records/{config}/{SUITE}/seed{seed}.json: missing run record.")
+                raise ReportError(f"{results_dir}/runs/records/{name}/{SUITE}/seed{seed}.json: missing run record.")
             rates[seed], records[seed] = float(rate), found[seed]
     return Cell(dict(sorted(rates.items())), dict(sorted(records.items())))
 
