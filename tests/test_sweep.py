@@ -624,3 +624,28 @@ def test_pool_with_names_a_pool_whose_paired_episodes_pool_too(tmp_path):
     assert Sweep.load(sweep_file(tmp_path, configs=[er, ol, fast, ol_no_pairs])).configs["ol_seeds"].pool_with == "A6"
     with pytest.raises(SweepError, match="unknown configuration 'nope'"):
         Sweep.load(sweep_file(tmp_path, configs=[er, {**er_seeds, "pool_with": "nope"}]))
+
+
+def test_keep_every_prunes_a_finished_trainings_checkpoints(tmp_path):
+    """`train.keep_every`: once a training ends, the checkpoints between every n-th step go (not the last one);
+    a value that is not a multiple of save_freq is refused."""
+    class FourCheckpoints(FakeLeRobot):  # steps 1-4 at save_freq 1; the fake's own last step is 2
+        def __call__(self, command: list[str], log: Path) -> int:
+            code = super().__call__(command, log)
+            if not any(c.endswith("lerobot-eval") for c in command):
+                out = Path(arg(command, "output_dir"))
+                for step in (1, 3, 4):
+                    (out / "checkpoints" / f"{step:06d}" / "pretrained_model").mkdir(parents=True)
+            return code
+
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"],
+                      train={"device": "cpu", "save_freq": 1, "keep_every": 3})
+    runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FourCheckpoints())
+    assert runner.run(configs=["predvla"], progress=False)["done"] == ["predvla/libero_object/seed0"]
+    out = runner.train_dir("predvla", "libero_object", 0)
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == ["000002", "000003", "last"]
+    assert json.loads((out / TRAIN_DONE_FILE).read_text())["checkpoints_pruned"] == 2
+    assert runner.record_path(Run("predvla", "libero_object", 0)).is_file()  # evaluated from the kept last one
+
+    with pytest.raises(SweepError, match="train.keep_every must be a positive multiple of train.save_freq"):
+        Sweep.load(sweep_file(tmp_path, train={"device": "cpu", "save_freq": 2, "keep_every": 3}))

@@ -42,7 +42,7 @@ from lerobot_predvla.experiments.lr_selection import (
 )
 from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
-from lerobot_predvla.utils.checkpoints import last_pretrained
+from lerobot_predvla.utils.checkpoints import last_pretrained, prune_checkpoints
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.versions import package_versions
@@ -187,6 +187,7 @@ class Settings:
     steps: int = PAPER_TRAIN_STEPS
     batch_size: int = PAPER_BATCH_SIZE
     save_freq: int = 5_000
+    keep_every: int | None = None  # after a training, keep only every keep_every-th step's checkpoint and the last
     train_device: str = "cuda"
     train_args: list[str] = field(default_factory=list)
     accelerate_processes: int = 1
@@ -284,6 +285,7 @@ class Sweep:
                 steps=int(train.get("steps", PAPER_TRAIN_STEPS)),
                 batch_size=int(train.get("batch_size", PAPER_BATCH_SIZE)),
                 save_freq=int(train.get("save_freq", 5_000)),
+                keep_every=int(train["keep_every"]) if train.get("keep_every") is not None else None,
                 train_device=str(train.get("device", "cuda")),
                 train_args=list(train.get("args", [])),
                 accelerate_processes=int(train.get("accelerate_processes", 1)),
@@ -302,6 +304,9 @@ class Sweep:
             raise SweepError(f"{path}: {err}") from err
         if settings.eval_workers < 1:
             raise SweepError(f"{path}: eval.workers must be >= 1, got {settings.eval_workers}.")
+        if settings.keep_every is not None and (settings.keep_every < 1 or settings.keep_every % settings.save_freq):
+            raise SweepError(f"{path}: train.keep_every must be a positive multiple of train.save_freq "
+                             f"({settings.save_freq}), got {settings.keep_every}.")
         for suite, spec in settings.data.items():
             if spec.half_turn not in HALF_TURN_RULES:
                 raise SweepError(f"{path}: data.{suite}.half_turn must be one of {HALF_TURN_RULES}, "
@@ -774,6 +779,8 @@ class Runner:
             print(f"predvla sweep: training {spec.name}/{suite}/seed{seed} failed (exit {code}); see "
                   f"{self.log_path(spec.name, suite, seed, 'train')}", file=sys.stderr)
             return None
+        keep_every = self.sweep.settings.keep_every
+        pruned = prune_checkpoints(out, keep_every) if keep_every else []
         result = {
             "checkpoint": os.path.relpath(last.resolve(), self.runs_dir.resolve()),
             "steps": self.sweep.steps_of(spec),
@@ -781,6 +788,7 @@ class Runner:
             "train_wall_s": round(time.monotonic() - start, 1),
             "resumed": resumed,
             "command": command,
+            "checkpoints_pruned": len(pruned),
         }
         atomic_write_json(done, result)
         return result

@@ -43,6 +43,24 @@ def last_pretrained(output_dir: Path) -> Path:
     return Path(output_dir) / CHECKPOINTS_DIR / LAST_CHECKPOINT_LINK / PRETRAINED_MODEL_DIR
 
 
+def prune_checkpoints(output_dir: Path, keep_every: int) -> list[Path]:
+    """Delete a finished run's step folders but every `keep_every`-th step's and the one `last` points to; returns
+    what it deleted. Each step folder holds the training posteriors and optimizer state (~300 MB for 500 LIBERO
+    demonstrations), so 30 of them fill a disk that the few a run is read at would not."""
+    if keep_every < 1:
+        raise ValueError(f"keep_every must be >= 1, got {keep_every}.")
+    checkpoints = Path(output_dir) / CHECKPOINTS_DIR
+    final = (checkpoints / LAST_CHECKPOINT_LINK).resolve()
+    removed = []
+    for folder in sorted(checkpoints.iterdir()):
+        if folder.is_symlink() or not folder.name.isdigit() or folder.resolve() == final:
+            continue
+        if int(folder.name) % keep_every:
+            shutil.rmtree(folder)
+            removed.append(folder)
+    return removed
+
+
 def find_pretrained(checkpoint: Path) -> Path | None:
     """The saved policy of `checkpoint`: the directory itself, its `pretrained_model/`, or None."""
     checkpoint = Path(checkpoint)
