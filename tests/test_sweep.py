@@ -12,7 +12,7 @@ import torch
 import torch.distributed as dist
 import torch.multiprocessing as mp
 import yaml
-from safetensors.torch import save_file
+from safetensors.torch import load_file, save_file
 
 from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.experiments.eval_info import EvalInfoError, parse_eval_info
@@ -299,12 +299,18 @@ def test_parse_eval_info_reads_lerobot_eval_output(tmp_path):
 
 
 @pytest.mark.slow
-def test_real_lerobot_train_through_the_runner(synthetic_dataset, tmp_path):
-    """The runner's lerobot-train command works as generated (evaluation faked: no LIBERO in tests)."""
+def test_real_lerobot_train_through_the_runner_and_publish(synthetic_dataset, tmp_path):
+    """The runner's lerobot-train command works as generated (evaluation faked: no LIBERO in tests). `train.publish`:
+    the finished training's model is written where the template says, without posteriors or optimizer state; the
+    training record and the evaluation name that copy, which loads as a policy. A folder holding other weights is
+    refused, never overwritten; a bad template is refused when the sweep file is read."""
+    from lerobot_predvla import PredVLAPolicy
+    from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
+
     dataset = {"repo_id": "local/predvla_synthetic", "root": str(synthetic_dataset)}
-    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], datasets={"libero_object": dataset},
-                      train={"device": "cpu", "steps": 2, "batch_size": 2, "save_freq": 2,
-                             "args": ["--num_workers=0", "--policy.sequence_length=32"]})
+    train = {"device": "cpu", "steps": 2, "batch_size": 2, "save_freq": 2, "publish": "published/{config}_seed{seed}",
+             "args": ["--num_workers=0", "--policy.sequence_length=32"]}
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], datasets={"libero_object": dataset}, train=train)
     fake = FakeLeRobot()
 
     def execute(command: list[str], log: Path) -> int:
@@ -317,6 +323,24 @@ def test_real_lerobot_train_through_the_runner(synthetic_dataset, tmp_path):
     assert outcome["done"] == ["predvla/libero_object/seed0"], log.read_text()[-3000:]
     record = json.loads(runner.record_path(Run("predvla", "libero_object", 0)).read_text())
     assert record["parameters"] == 675_732 and record["steps"] == 2
+    published = tmp_path / "published" / "predvla_seed0"
+    trained = json.loads((runner.train_dir("predvla", "libero_object", 0) / TRAIN_DONE_FILE).read_text())
+    assert (runner.runs_dir / trained["checkpoint"]).resolve() == published.resolve()
+    last = (runner.runs_dir / trained["trained_checkpoint"]).resolve()
+    assert (published / "model.safetensors").read_bytes() == (last / "model.safetensors").read_bytes()
+    assert (last / POSTERIOR_STORE_FILE).is_file() and not (published / POSTERIOR_STORE_FILE).exists()
+    assert not (published / "training_state").exists()
+    assert arg(fake.commands[-1], "policy.path") == str(published.resolve())
+    assert PredVLAPolicy.from_pretrained(published).config.type == "predvla"
+
+    spec = runner.sweep.configs["predvla"]  # a sweep stopped after the copy: the same weights there are kept
+    assert runner.publish(spec, "libero_object", 0, last) == runner.publish_dir(spec, "libero_object", 0)
+    save_file({"w": torch.ones(2)}, str(published / "model.safetensors"))  # another training's weights: refused
+    assert runner.publish(spec, "libero_object", 0, last) is False
+    assert load_file(str(published / "model.safetensors"))["w"].tolist() == [1.0, 1.0]
+
+    with pytest.raises(SweepError, match=r"train.publish 'published/\{run\}': expected a folder with only"):
+        Sweep.load(sweep_file(tmp_path, train={**train, "publish": "published/{run}"}))
 
 
 # ----- posterior store under DDP -----------------------------------------------------------------------------

@@ -91,9 +91,11 @@ def test_the_baselines_choose_their_rate_on_heldout_demonstrations_and_are_evalu
         assert arg(full, "steps") == "50000" and arg(full, "dataset.eval_split") is None
         assert arg(full, "batch_size") == "16" and "--nproc_per_node=2" in full  # 2 x 16 = 32
         assert "lr_sweep" in full  # the rate is the selection's, unknown before it runs
-        ours, theirs = ([line for line in lines if "lerobot-eval" in line and f"/train/{n}/" in line]
+        ours, theirs = ([line for line in lines if "lerobot-eval" in line and f"/eval/{n}/" in line]
                         for n in (name, "predvla_table2"))
         assert len(ours) == 10  # one part per task
+        # train.publish: the full run's model, committed, is what its evaluations read
+        assert all(arg(line, "policy.path").endswith(f"checkpoints/libero_object_table2/{name}_seed0") for line in ours)
 
         def protocol(line: str) -> list[str]:
             return [a for a in line.split() if not a.startswith(("--policy.path=", "--output_dir="))]

@@ -14,6 +14,7 @@ processes or hosts sharing RUNS_DIR split a sweep without overlap; `accelerate_p
 with `accelerate launch --multi_gpu` (LeRobot's multi-GPU path).
 """
 
+import filecmp
 import json
 import math
 import os
@@ -188,6 +189,10 @@ class Settings:
     batch_size: int = PAPER_BATCH_SIZE
     save_freq: int = 5_000
     keep_every: int | None = None  # after a training, keep only every keep_every-th step's checkpoint and the last
+    # After a training, its final model as `predvla push --out` writes it (no posteriors, no optimizer state: a few
+    # MB, to commit) in this folder, a template of {config}, {suite} and {seed} relative to the sweep file; the
+    # training record and every evaluation then read that copy, so a fresh clone evaluates without the runs dir.
+    publish: str | None = None
     train_device: str = "cuda"
     train_args: list[str] = field(default_factory=list)
     accelerate_processes: int = 1
@@ -286,6 +291,7 @@ class Sweep:
                 batch_size=int(train.get("batch_size", PAPER_BATCH_SIZE)),
                 save_freq=int(train.get("save_freq", 5_000)),
                 keep_every=int(train["keep_every"]) if train.get("keep_every") is not None else None,
+                publish=str(train["publish"]) if train.get("publish") is not None else None,
                 train_device=str(train.get("device", "cuda")),
                 train_args=list(train.get("args", [])),
                 accelerate_processes=int(train.get("accelerate_processes", 1)),
@@ -307,6 +313,12 @@ class Sweep:
         if settings.keep_every is not None and (settings.keep_every < 1 or settings.keep_every % settings.save_freq):
             raise SweepError(f"{path}: train.keep_every must be a positive multiple of train.save_freq "
                              f"({settings.save_freq}), got {settings.keep_every}.")
+        if settings.publish is not None:
+            try:
+                settings.publish.format(config="c", suite="s", seed=0)
+            except (KeyError, IndexError, ValueError) as err:
+                raise SweepError(f"{path}: train.publish {settings.publish!r}: expected a folder with only {{config}}, "
+                                 f"{{suite}} and {{seed}} to fill in ({err!r}).") from err
         for suite, spec in settings.data.items():
             if spec.half_turn not in HALF_TURN_RULES:
                 raise SweepError(f"{path}: data.{suite}.half_turn must be one of {HALF_TURN_RULES}, "
@@ -704,8 +716,12 @@ class Runner:
                 if (trained, suite) not in selected:  # one selection serves every seed
                     commands += self.pending_lr_commands(self.sweep.configs[trained], suite)
                     selected.add((trained, suite))
-                commands.append(self.pending_train_command(self.sweep.configs[trained], suite, seed))
+                spec = self.sweep.configs[trained]
+                commands.append(self.pending_train_command(spec, suite, seed))
                 checkpoint = last_pretrained(out)
+                if self.sweep.settings.publish:
+                    checkpoint = self.publish_dir(spec, suite, seed)
+                    commands.append(self.publish_command(checkpoint, last_pretrained(out)))
             commands += [command for run in pending for command in self.pending_eval_commands(run, checkpoint)]
         return commands
 
@@ -757,8 +773,9 @@ class Runner:
         directory moved to another machine, or pointed at a committed checkpoint, still finds it."""
         return (self.runs_dir / trained["checkpoint"]).resolve()
 
-    def train(self, spec: ConfigSpec, suite: str, seed: int) -> dict | None:
-        """Train (or resume, or reuse) one checkpoint; None when lerobot-train failed."""
+    def train(self, spec: ConfigSpec, suite: str, seed: int, publish: bool = True) -> dict | None:
+        """Train (or resume, or reuse) one checkpoint; None when lerobot-train (or its `train.publish`) failed.
+        `publish=False`: never publish it (a learning-rate candidate)."""
         out = self.train_dir(spec.name, suite, seed)
         done = out / TRAIN_DONE_FILE
         if done.is_file():
@@ -779,19 +796,54 @@ class Runner:
             print(f"predvla sweep: training {spec.name}/{suite}/seed{seed} failed (exit {code}); see "
                   f"{self.log_path(spec.name, suite, seed, 'train')}", file=sys.stderr)
             return None
+        train_wall = round(time.monotonic() - start, 1)
         keep_every = self.sweep.settings.keep_every
         pruned = prune_checkpoints(out, keep_every) if keep_every else []
+        published = self.publish(spec, suite, seed, last) if publish and self.sweep.settings.publish else None
+        if published is False:
+            return None
         result = {
-            "checkpoint": os.path.relpath(last.resolve(), self.runs_dir.resolve()),
+            "checkpoint": os.path.relpath((published or last).resolve(), self.runs_dir.resolve()),
             "steps": self.sweep.steps_of(spec),
             "parameters": count_parameters(last / "model.safetensors"),
-            "train_wall_s": round(time.monotonic() - start, 1),
+            "train_wall_s": train_wall,
             "resumed": resumed,
             "command": command,
             "checkpoints_pruned": len(pruned),
         }
+        if published:
+            result["trained_checkpoint"] = os.path.relpath(last.resolve(), self.runs_dir.resolve())
         atomic_write_json(done, result)
         return result
+
+    def publish_dir(self, spec: ConfigSpec, suite: str, seed: int) -> Path:
+        return self._path(self.sweep.settings.publish.format(config=spec.name, suite=suite, seed=seed))
+
+    @staticmethod
+    def publish_command(dest: Path, last: Path) -> list[str]:
+        return [sys.executable, "-m", "lerobot_predvla.cli.main", "push", str(last), os.path.relpath(dest),
+                "--out", str(dest)]
+
+    def publish(self, spec: ConfigSpec, suite: str, seed: int, last: Path) -> Path | bool:
+        """`train.publish`: the final model of a training, as `predvla push --out` writes it, in its folder; False
+        when that failed. A folder already there (a sweep stopped between the copy and the training record) is
+        kept if it holds this training's weights, and refused otherwise (the run fails; nothing is overwritten)."""
+        dest = self.publish_dir(spec, suite, seed)
+        if dest.exists():
+            if (dest / "model.safetensors").is_file() and filecmp.cmp(dest / "model.safetensors",
+                                                                       last / "model.safetensors", shallow=False):
+                return dest
+            print(f"predvla sweep: train.publish: {dest} exists and does not hold the weights of {last}; move it "
+                  "away or change train.publish.", file=sys.stderr)
+            return False
+        command = self.publish_command(dest, last)
+        log = self.log_path(spec.name, suite, seed, "publish")
+        code = self.execute(command, log)
+        if code != 0 or not (dest / "model.safetensors").is_file():
+            print(f"predvla sweep: publishing {spec.name}/{suite}/seed{seed} to {dest} failed (exit {code}); see "
+                  f"{log}", file=sys.stderr)
+            return False
+        return dest
 
     # ----- learning-rate selection ---------------------------------------------------------------------------
     def candidate_spec(self, spec: ConfigSpec, rate: float) -> ConfigSpec:
@@ -817,7 +869,7 @@ class Runner:
             return json.loads(path.read_text())
         sweep, candidate = spec.lr_sweep, self.candidate_spec(spec, rate)
         log = self.log_path(candidate.name, suite, sweep.seed, "train")
-        trained = self.train(candidate, suite, sweep.seed)
+        trained = self.train(candidate, suite, sweep.seed, publish=False)
         if trained is None:
             diverged = divergence(log)
             if diverged is None:
