@@ -330,3 +330,24 @@ def test_baselines_learning_rates_from_the_sweeps_selection(runs, tmp_path):
     text = (tmp_path / "report" / "report.md").read_text()
     assert "## Baselines' learning rates" in text
     assert "| B2 | object | -3.250 | -4.500 | — | 0.001 | 10,000 | 3 |" in text
+
+
+def test_fresh_clone_section_names_what_is_read_and_what_is_redone(tmp_path, monkeypatch):
+    """A training whose record names a model outside the runs dir's train/ is read from there; one whose checkpoint
+    lies in train/ is redone; data stages are recomputed, with their recorded time."""
+    from lerobot_predvla.experiments.report import fresh_clone_section
+    from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE
+
+    monkeypatch.chdir(tmp_path)
+    runs = tmp_path / "results" / "x" / "runs"
+    atomic_write_json(runs / "data" / "libero_object.json", {"demos": {"command": [], "wall_s": 600},
+                                                             "convert": {"command": [], "wall_s": 300}})
+    for seed, checkpoint in ((0, "../../../checkpoints/x/predvla_seed0"),
+                             (1, "train/predvla/libero_object/seed1/checkpoints/030000/pretrained_model")):
+        atomic_write_json(runs / "train" / "predvla" / "libero_object" / f"seed{seed}" / TRAIN_DONE_FILE,
+                          {"checkpoint": checkpoint, "steps": 30000})
+    text = "\n".join(fresh_clone_section(runs))
+    assert "| data of libero_object (demos, convert) | recomputed from the sweep file (15 min as recorded)" in text
+    assert "| training predvla / libero_object / seed 0 | read from `checkpoints/x/predvla_seed0` |" in text
+    assert "| training predvla / libero_object / seed 1 | redone (30,000 steps)" in text
+    assert fresh_clone_section(tmp_path / "empty") == []

@@ -28,7 +28,7 @@ from scipy.stats import binomtest
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
 from lerobot_predvla.experiments.lr_selection import LR_SWEEP_DIR
-from lerobot_predvla.experiments.sweep import eval_run_dir
+from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE, eval_run_dir
 from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
@@ -753,6 +753,39 @@ def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
     return lines
 
 
+def _from_repository_root(path: Path) -> str:
+    path = path.resolve()
+    return str(path.relative_to(Path.cwd())) if path.is_relative_to(Path.cwd()) else str(path)
+
+
+def fresh_clone_section(runs_dir: Path) -> list[str]:
+    """What a fresh clone of the repository recomputes and what it reads, stage by stage: the data stages (their
+    outputs are never committed), and each finished training, whose model is read where its record names one outside
+    the runs directory's `train/` (committed, e.g. by the sweep's `train.publish`) and is otherwise redone (its
+    checkpoints stay on the machine that trained it)."""
+    runs_dir = Path(runs_dir).resolve()
+    rows = []
+    for path in sorted((runs_dir / "data").glob("*.json")):
+        stages = _load_json(path)
+        minutes = sum(v["wall_s"] for v in stages.values()) / 60
+        rows.append([f"data of {path.stem} ({', '.join(stages)})",
+                     f"recomputed from the sweep file ({minutes:.0f} min as recorded); needed only to train"])
+    for path in sorted((runs_dir / "train").glob(f"*/*/seed*/{TRAIN_DONE_FILE}")):
+        trained = _load_json(path)
+        checkpoint = (runs_dir / trained["checkpoint"]).resolve()
+        config, suite, seed = path.parts[-4], path.parts[-3], path.parts[-2].removeprefix("seed")
+        local = checkpoint.is_relative_to(runs_dir / "train")
+        rows.append([f"training {config} / {suite} / seed {seed}",
+                     f"redone ({trained['steps']:,} steps): its checkpoint stays on the machine that trained it"
+                     if local else f"read from `{_from_repository_root(checkpoint)}`"])
+    if not rows:
+        return []
+    return ["", "## On a fresh clone", "",
+            "Every stage is skipped when its output exists; run records, `eval_info.json` files and logs are "
+            "committed, so a fresh clone runs only the missing runs, and these stages where a missing run needs them:",
+            "", _table(["stage", "on a fresh clone"], rows)]
+
+
 # ----- report ----------------------------------------------------------------------------------------------
 def starts_section(path: Path) -> list[str]:
     """The demonstrations' starts against the official init states (mean over tasks of `start_spread.json`)."""
@@ -900,6 +933,7 @@ def write_report(runs_dir: Path, out: Path) -> dict:
     stages = stages_section(records, runs_dir)
     if stages:
         sections += ["", "## Stages: wall time and commands", "", *stages]
+    sections += fresh_clone_section(runs_dir)
     if missing:
         sections += ["", "## Missing runs", "", f"{len(missing)} planned runs have no record:", "",
                      *[f"- `{m}`" for m in missing]]
