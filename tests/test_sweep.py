@@ -334,9 +334,9 @@ def test_real_lerobot_train_through_the_runner_and_publish(synthetic_dataset, tm
     assert PredVLAPolicy.from_pretrained(published).config.type == "predvla"
 
     spec = runner.sweep.configs["predvla"]  # a sweep stopped after the copy: the same weights there are kept
-    assert runner.publish(spec, "libero_object", 0, last) == runner.publish_dir(spec, "libero_object", 0)
+    assert runner.publish_model(spec, "libero_object", 0, last) == runner.publish_dir(spec, "libero_object", 0)
     save_file({"w": torch.ones(2)}, str(published / "model.safetensors"))  # another training's weights: refused
-    assert runner.publish(spec, "libero_object", 0, last) is False
+    assert runner.publish_model(spec, "libero_object", 0, last) is False
     assert load_file(str(published / "model.safetensors"))["w"].tolist() == [1.0, 1.0]
 
     with pytest.raises(SweepError, match=r"train.publish 'published/\{run\}': expected a folder with only"):

@@ -753,11 +753,6 @@ def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
     return lines
 
 
-def _from_repository_root(path: Path) -> str:
-    path = path.resolve()
-    return str(path.relative_to(Path.cwd())) if path.is_relative_to(Path.cwd()) else str(path)
-
-
 def fresh_clone_section(runs_dir: Path) -> list[str]:
     """What a fresh clone of the repository recomputes and what it reads, stage by stage: the data stages (their
     outputs are never committed), and each finished training, whose model is read where its record names one outside
@@ -777,7 +772,7 @@ def fresh_clone_section(runs_dir: Path) -> list[str]:
         local = checkpoint.is_relative_to(runs_dir / "train")
         rows.append([f"training {config} / {suite} / seed {seed}",
                      f"redone ({trained['steps']:,} steps): its checkpoint stays on the machine that trained it"
-                     if local else f"read from `{_from_repository_root(checkpoint)}`"])
+                     if local else f"read from `{_relative([str(checkpoint)])}`"])
     if not rows:
         return []
     return ["", "## On a fresh clone", "",

@@ -718,10 +718,10 @@ class Runner:
                     selected.add((trained, suite))
                 spec = self.sweep.configs[trained]
                 commands.append(self.pending_train_command(spec, suite, seed))
-                checkpoint = last_pretrained(out)
+                checkpoint = last = last_pretrained(out)
                 if self.sweep.settings.publish:
                     checkpoint = self.publish_dir(spec, suite, seed)
-                    commands.append(self.publish_command(checkpoint, last_pretrained(out)))
+                    commands.append(self.publish_command(checkpoint, last))
             commands += [command for run in pending for command in self.pending_eval_commands(run, checkpoint)]
         return commands
 
@@ -799,7 +799,7 @@ class Runner:
         train_wall = round(time.monotonic() - start, 1)
         keep_every = self.sweep.settings.keep_every
         pruned = prune_checkpoints(out, keep_every) if keep_every else []
-        published = self.publish(spec, suite, seed, last) if publish and self.sweep.settings.publish else None
+        published = self.publish_model(spec, suite, seed, last) if publish and self.sweep.settings.publish else None
         if published is False:
             return None
         result = {
@@ -824,7 +824,7 @@ class Runner:
         return [sys.executable, "-m", "lerobot_predvla.cli.main", "push", str(last), os.path.relpath(dest),
                 "--out", str(dest)]
 
-    def publish(self, spec: ConfigSpec, suite: str, seed: int, last: Path) -> Path | bool:
+    def publish_model(self, spec: ConfigSpec, suite: str, seed: int, last: Path) -> Path | bool:
         """`train.publish`: the final model of a training, as `predvla push --out` writes it, in its folder; False
         when that failed. A folder already there (a sweep stopped between the copy and the training record) is
         kept if it holds this training's weights, and refused otherwise (the run fails; nothing is overwritten)."""
