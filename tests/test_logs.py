@@ -3,7 +3,7 @@
 import sys
 
 from lerobot_predvla.experiments.kill_resume import logged_steps
-from lerobot_predvla.experiments.logs import compact_log, compact_text, main
+from lerobot_predvla.experiments.logs import TrainingRun, compact_log, compact_text, main, training_runs
 from lerobot_predvla.experiments.lr_selection import heldout_losses
 from lerobot_predvla.experiments.sweep import subprocess_executor
 
@@ -77,3 +77,26 @@ def test_the_command_line_names_a_missing_path(tmp_path, capsys):
     assert "nope: no such file or directory" in capsys.readouterr().err
     (tmp_path / "a.log").write_text("".join(f"\r{train_bar(s)}" for s in range(1, 201)) + "\n")
     assert main([str(tmp_path)]) == 0 and (tmp_path / "a.log").read_text() == train_bar(200) + "\n"
+
+
+def train_call(first: int, reached: int, steps: int = 30, start: str = "12:00:00", end: str = "12:05:30") -> str:
+    """One lerobot-train call as the sweep logs it: its command line, INFO lines, its progress bar's redraws."""
+    left = steps - first
+    bar = "".join(f"\r{train_bar(s, left)}" for s in range(0, reached - first + 1))
+    return (f"$ /venv/bin/torchrun --nproc_per_node=2 /venv/bin/lerobot-train --steps={steps}\n"
+            f"INFO 2026-11-26 {start} ot_train.py:272 {{'batch_size': 16,\n"
+            f"INFO 2026-11-26 {start} ot_train.py:441 cfg.steps={steps} (30)\n"
+            f"{bar}INFO 2026-11-26 {end} ot_train.py:641 step:{reached} smpl:1K loss:-1.0\n")
+
+
+def test_training_runs_time_every_call_of_a_resumed_training():
+    """A training stopped twice: three calls, each timed from its own lines and placed by its bar; the second was
+    killed mid-bar, so the third call's command line is glued to its last redraw."""
+    first = train_call(0, 12, end="12:05:30")
+    killed = train_call(10, 13, start="13:00:00", end="13:01:00")
+    killed = killed[:killed.rindex("INFO")]  # killed before its next INFO line: the log ends on the bar
+    last = train_call(10, 30, start="23:59:00", end="00:09:00").replace("2026-11-26 00:09", "2026-11-27 00:09")
+    text = first + killed + last
+    for log in (text, compact_text(text)):
+        assert training_runs(log) == [TrainingRun(330.0, 0, 12), TrainingRun(0.0, 10, 13), TrainingRun(600.0, 10, 30)]
+    assert training_runs("") == [] and training_runs("no lerobot-train here\n") == []

@@ -351,3 +351,26 @@ def test_fresh_clone_section_names_what_is_read_and_what_is_redone(tmp_path, mon
     assert "| training predvla / libero_object / seed 0 | read from `checkpoints/x/predvla_seed0` |" in text
     assert "| training predvla / libero_object / seed 1 | redone (30,000 steps)" in text
     assert fresh_clone_section(tmp_path / "empty") == []
+
+
+def test_training_time_counts_every_call_in_the_training_log(tmp_path):
+    """A resumed training's record times its last lerobot-train call; the stage table sums the calls in its log,
+    for the run that trained and for one evaluating its checkpoint; without a log, the record's time stands."""
+    from lerobot_predvla.experiments.report import stages_section
+
+    log = tmp_path / "logs" / "predvla" / "libero_object" / "seed0.train.log"
+    log.parent.mkdir(parents=True)
+    log.write_text("$ torchrun lerobot-train --steps=30\nINFO 2026-11-26 12:00:00 ot_train.py:441 cfg.steps=30\n"
+                   "INFO 2026-11-26 13:00:00 ot_train.py:641 step:10\n"
+                   "$ torchrun lerobot-train --resume=true\nINFO 2026-11-26 14:00:00 ot_train.py:441 cfg.steps=30\n"
+                   "INFO 2026-11-26 14:30:00 ot_train.py:641 step:30\n")
+    tasks = {"0": {"successes": 1, "episodes": 2}}
+    records = [{"config": "predvla", "suite": "libero_object", "seed": 0, "steps": 30, "train_wall_s": 1800.0,
+                "tasks": tasks},
+               {"config": "A6", "checkpoint_from": "predvla", "suite": "libero_object", "seed": 0, "steps": 30,
+                "train_wall_s": 1800.0, "tasks": tasks},
+               {"config": "predvla", "suite": "libero_object", "seed": 1, "steps": 30, "train_wall_s": 600.0,
+                "tasks": tasks}]
+    table = "\n".join(stages_section(records, tmp_path)).splitlines()
+    rows = [line for line in table if line.startswith("| ") and "libero_object" in line]
+    assert [line.split(" | ")[4] for line in rows] == ["90 (2 calls)", "90 (2 calls)", "10"]

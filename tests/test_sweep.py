@@ -26,6 +26,7 @@ from lerobot_predvla.experiments.sweep import (
     parse_shard,
     subprocess_executor,
 )
+from lerobot_predvla.utils.versions import machine
 
 
 def sweep_file(tmp_path: Path, **changes) -> Path:
@@ -111,7 +112,7 @@ def test_runs_write_records_and_inference_variants_reuse_checkpoints(tmp_path):
     assert record["success_rate"] == pytest.approx(100 * 144 / 150)
     assert record["parameters"] == 17 and record["steps"] == 30_000 and record["group"] == "ablation"
     assert record["checkpoint"].endswith("train/predvla/libero_object/seed1/checkpoints/000002/pretrained_model")
-    assert {"lerobot", "torch", "python"} <= set(record["versions"])
+    assert {"lerobot", "torch", "python", "machine"} <= set(record["versions"])
     a6_eval = record["commands"]["eval"]
     assert "--policy.er_iterations=0" in a6_eval and "--env.episode_length=600" in a6_eval
     assert "--eval.n_episodes=50" in a6_eval and "--env.init_states=true" in a6_eval
@@ -147,7 +148,8 @@ def test_killed_training_resumes_and_killed_eval_is_redone(tmp_path):
     resume = fake.commands[1]
     assert "--resume=true" in resume
     assert arg(resume, "config_path").endswith("seed0/checkpoints/last/pretrained_model/train_config.json")
-    assert json.loads((runner.train_dir("predvla", "libero_object", 0) / TRAIN_DONE_FILE).read_text())["resumed"]
+    trained = json.loads((runner.train_dir("predvla", "libero_object", 0) / TRAIN_DONE_FILE).read_text())
+    assert trained["resumed"] and trained["machine"] == machine()
 
 
 def test_a_later_call_with_other_seeds_adds_to_the_plan(tmp_path):
@@ -673,3 +675,14 @@ def test_keep_every_prunes_a_finished_trainings_checkpoints(tmp_path):
 
     with pytest.raises(SweepError, match="train.keep_every must be a positive multiple of train.save_freq"):
         Sweep.load(sweep_file(tmp_path, train={"device": "cpu", "save_freq": 2, "keep_every": 3}))
+
+
+def test_machine_names_the_processor_its_cores_and_bf16(tmp_path):
+    """Recorded beside wall times: /proc/cpuinfo's first model name and flags."""
+    cpuinfo = tmp_path / "cpuinfo"
+    cpuinfo.write_text("processor\t: 0\nmodel name\t: Some Xeon\nflags\t\t: fpu avx512f avx512_bf16\n\n"
+                       "processor\t: 1\nmodel name\t: Some Xeon\nflags\t\t: fpu avx512f avx512_bf16\n")
+    assert machine(cpuinfo) == f"Some Xeon, {os.cpu_count()} logical CPUs, AVX-512 bf16: yes"
+    cpuinfo.write_text("model name\t: AMD EPYC\nflags\t\t: fpu avx2\n")
+    assert machine(cpuinfo).endswith("AVX-512 bf16: no") and machine(cpuinfo).startswith("AMD EPYC, ")
+    assert "logical CPUs" in machine(tmp_path / "absent")

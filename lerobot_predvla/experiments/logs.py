@@ -7,10 +7,15 @@ where a run of redraws ends and every other line as it is, so the messages, the 
 `lr_selection` and `kill_resume` read, and each bar's final count stay.
 
     python -m lerobot_predvla.experiments.logs results/*/runs/logs
+
+`training_runs` reads a training's log back as the `lerobot-train` calls it holds: a training resumed after a stop
+has one per call, and its wall time is theirs together.
 """
 
 import re
 import sys
+from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 
 from lerobot_predvla.utils.io import atomic_write_bytes
@@ -63,6 +68,49 @@ def compact_log(path: Path) -> int:
     if compacted != data:
         atomic_write_bytes(path, compacted)
     return len(data) - len(compacted)
+
+
+# What `training_runs` reads: the command line the sweep writes before each call ("$ .../torchrun ..."), the
+# timestamp of each of lerobot-train's INFO lines, its total step count, and its progress bar, whose total is the
+# steps left when the call started (a resumed call counts from its checkpoint).
+_TRAIN_EVENT = re.compile(
+    r"(?P<command>\$ \S*(?:torchrun|lerobot-train)\b)"
+    r"|INFO (?P<stamp>\d{4}-\d\d-\d\d \d\d:\d\d:\d\d) "
+    r"|cfg\.steps=(?P<steps>\d+)"
+    r"|Training: *\d+%\|[^|]*\| *(?P<done>\d+)/(?P<left>\d+) \["
+)
+
+
+@dataclass(frozen=True)
+class TrainingRun:
+    """One `lerobot-train` call in a training's log."""
+
+    wall_s: float  # its first to its last timestamped line: short of the true time by less than a logging interval
+    first_step: int | None  # the step it started from (0, or the checkpoint it resumed); None: no progress bar
+    last_step: int | None  # the last step its progress bar reached
+
+
+def training_runs(text: str) -> list[TrainingRun]:
+    """The `lerobot-train` calls of a training log, in order (lines before the first command line open one)."""
+    runs: list[dict] = []
+    for match in _TRAIN_EVENT.finditer(text):
+        if match["command"] or not runs:
+            runs.append({"stamps": [], "steps": None, "bar": None})
+        run = runs[-1]
+        if match["stamp"]:
+            run["stamps"].append(datetime.fromisoformat(match["stamp"]))
+        elif match["steps"]:
+            run["steps"] = int(match["steps"])
+        elif match["done"]:
+            run["bar"] = int(match["done"]), int(match["left"])
+    out = []
+    for run in runs:
+        stamps, first = run["stamps"], None
+        if run["bar"] is not None and run["steps"] is not None:
+            first = run["steps"] - run["bar"][1]
+        out.append(TrainingRun(wall_s=(max(stamps) - min(stamps)).total_seconds() if stamps else 0.0,
+                               first_step=first, last_step=None if first is None else first + run["bar"][0]))
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

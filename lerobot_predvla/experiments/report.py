@@ -27,8 +27,9 @@ import numpy as np
 from scipy.stats import binomtest
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
+from lerobot_predvla.experiments.logs import training_runs
 from lerobot_predvla.experiments.lr_selection import LR_SWEEP_DIR
-from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE, eval_run_dir
+from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE, eval_run_dir, run_log_path
 from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
@@ -723,6 +724,18 @@ def _stage_commands(command: list[str] | list[list[str]]) -> str:
     return " and ".join(f"`{_relative(c)}`" for c in commands)
 
 
+def _training_minutes(record: dict, runs_dir: Path) -> str:
+    """A record's training wall time: from its training's log, over every `lerobot-train` call (the record's
+    `train_wall_s` times the last call only), else the record's; the number of calls where there were several."""
+    trained = record.get("checkpoint_from") or record["config"]
+    log = run_log_path(runs_dir, trained, record["suite"], record["seed"], "train")
+    runs = training_runs(log.read_text(errors="replace")) if log.is_file() else []
+    wall = sum(r.wall_s for r in runs) if runs else record.get("train_wall_s")
+    if not wall:
+        return MISSING
+    return f"{wall / 60:.0f}" + (f" ({len(runs)} calls)" if len(runs) > 1 else "")
+
+
 def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
     """Wall time of every recorded stage (data, training, evaluation) and the exact commands."""
     lines = []
@@ -735,9 +748,8 @@ def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
     rows, commands = [], []
     for r in sorted(records, key=lambda r: (r["config"], r["suite"], int(r["seed"]))):
         episodes = sum(t["episodes"] for t in r["tasks"].values())
-        train = r.get("train_wall_s")
         rows.append([r["config"], r["suite"], str(r["seed"]), str(r.get("steps", MISSING)),
-                     f"{train / 60:.0f}" if train else MISSING,
+                     _training_minutes(r, runs_dir),
                      f"{r['eval_wall_s'] / 60:.0f}" if r.get("eval_wall_s") else MISSING, str(episodes)])
         cmd = r.get("commands") or {}
         if cmd.get("train") and not r.get("checkpoint_from"):
@@ -747,7 +759,10 @@ def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
     if not rows:
         return []
     lines += [_table(["config", "suite", "seed", "training steps", "training (min)", "evaluation (min)",
-                      "episodes"], rows)]
+                      "episodes"], rows),
+              "", "Training: the `lerobot-train` calls in its log together (a training resumed after a stop has "
+              "several; from the timestamps of their lines, short by less than a logging interval each). "
+              "Evaluation: its finished parts together (with several workers, more than the time that passed)."]
     if commands:
         lines += ["", "Commands, as recorded (paths relative to the repository root):", "", *commands]
     return lines

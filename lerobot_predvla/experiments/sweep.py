@@ -46,7 +46,7 @@ from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH,
 from lerobot_predvla.utils.checkpoints import last_pretrained, prune_checkpoints
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.parameters import count_parameters
-from lerobot_predvla.utils.versions import package_versions
+from lerobot_predvla.utils.versions import machine, package_versions
 
 PAPER_TRAIN_STEPS = 30_000
 PAPER_BATCH_SIZE = 32
@@ -71,6 +71,11 @@ class SweepError(ValueError):
 def eval_run_dir(runs_dir: Path, config: str, suite: str, seed: int) -> Path:
     """Where a run's evaluation writes: its eval_info.json, or one task part per subfolder."""
     return Path(runs_dir) / "eval" / config / suite / f"seed{seed}"
+
+
+def run_log_path(runs_dir: Path, name: str, suite: str, seed: int, stage: str) -> Path:
+    """Where a stage (train, eval, publish, or a data stage under name "data") of a run writes its log."""
+    return Path(runs_dir) / "logs" / name / suite / f"seed{seed}.{stage}.log"
 
 
 def _recipe(fields: dict) -> dict:
@@ -487,8 +492,8 @@ def subprocess_executor(command: list[str], log: Path) -> int:
 
 
 def versions() -> dict[str, str]:
-    """Package versions, and the plugin's git commit when it runs from a checkout."""
-    found = package_versions()
+    """Package versions, the plugin's git commit when it runs from a checkout, and the machine."""
+    found = {**package_versions(), "machine": machine()}
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
                                 cwd=Path(__file__).parent, check=False).stdout.strip()
@@ -521,7 +526,7 @@ class Runner:
         return self.runs_dir / "records" / run.config / run.suite / f"seed{run.seed}.json"
 
     def log_path(self, name: str, suite: str, seed: int, stage: str) -> Path:
-        return self.runs_dir / "logs" / name / suite / f"seed{seed}.{stage}.log"
+        return run_log_path(self.runs_dir, name, suite, seed, stage)
 
     # ----- commands ---------------------------------------------------------------------------------------
     def launcher(self) -> list[str]:
@@ -806,7 +811,8 @@ class Runner:
             "checkpoint": os.path.relpath((published or last).resolve(), self.runs_dir.resolve()),
             "steps": self.sweep.steps_of(spec),
             "parameters": count_parameters(last / "model.safetensors"),
-            "train_wall_s": train_wall,
+            "train_wall_s": train_wall,  # this call only: a resumed training's earlier calls are in its log
+            "machine": machine(),
             "resumed": resumed,
             "command": command,
             "checkpoints_pruned": len(pruned),

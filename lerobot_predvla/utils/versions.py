@@ -1,7 +1,10 @@
 """Installed versions of the distributions a result depends on (recorded beside results and on model cards)."""
 
 import importlib.metadata
+import os
+import platform
 import sys
+from pathlib import Path
 
 NOT_INSTALLED = "not installed"
 RUN_DISTRIBUTIONS = ("lerobot", "torch", "lerobot_policy_predvla", "hf-libero")
@@ -17,3 +20,19 @@ def package_version(distribution: str) -> str:
 def package_versions(distributions: tuple[str, ...] = RUN_DISTRIBUTIONS) -> dict[str, str]:
     """{"python": ..., distribution: version or "not installed"}."""
     return {"python": sys.version.split()[0], **{d: package_version(d) for d in distributions}}
+
+
+def machine(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The processor a result's wall times were measured on: model, logical CPUs, and whether it has the AVX-512
+    bfloat16 instructions (machines of the same core count differ in speed; wall times compare only on one)."""
+    model, flags = platform.processor() or platform.machine(), set()
+    if cpuinfo.is_file():
+        for line in cpuinfo.read_text(errors="replace").splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name":
+                model = value.strip()
+            elif key.strip() == "flags":
+                flags = set(value.split())
+            if model and flags:
+                break
+    return f"{model}, {os.cpu_count()} logical CPUs, AVX-512 bf16: {'yes' if 'avx512_bf16' in flags else 'no'}"
