@@ -27,7 +27,7 @@ import numpy as np
 from scipy.stats import binomtest
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
-from lerobot_predvla.experiments.logs import training_runs
+from lerobot_predvla.experiments.logs import TrainingRun, training_runs
 from lerobot_predvla.experiments.lr_selection import LR_SWEEP_DIR
 from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE, eval_run_dir, run_log_path
 from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
@@ -724,12 +724,15 @@ def _stage_commands(command: list[str] | list[list[str]]) -> str:
     return " and ".join(f"`{_relative(c)}`" for c in commands)
 
 
-def _training_minutes(record: dict, runs_dir: Path) -> str:
+def _training_minutes(record: dict, runs_dir: Path, read: dict[Path, list[TrainingRun]]) -> str:
     """A record's training wall time: from its training's log, over every `lerobot-train` call (the record's
-    `train_wall_s` times the last call only), else the record's; the number of calls where there were several."""
+    `train_wall_s` times the last call only), else the record's; the number of calls where there were several.
+    `read`: the logs parsed so far (the records that evaluate one training share its log)."""
     trained = record.get("checkpoint_from") or record["config"]
     log = run_log_path(runs_dir, trained, record["suite"], record["seed"], "train")
-    runs = training_runs(log.read_text(errors="replace")) if log.is_file() else []
+    if log not in read:
+        read[log] = training_runs(log.read_text(errors="replace")) if log.is_file() else []
+    runs = read[log]
     wall = sum(r.wall_s for r in runs) if runs else record.get("train_wall_s")
     if not wall:
         return MISSING
@@ -745,11 +748,11 @@ def stages_section(records: list[dict], runs_dir: Path) -> list[str]:
                   _table(["stage", "wall time (min)", "command"],
                          [[k, f"{v['wall_s'] / 60:.1f}", _stage_commands(v["command"])] for k, v in stages.items()]),
                   ""]
-    rows, commands = [], []
+    rows, commands, training_logs = [], [], {}
     for r in sorted(records, key=lambda r: (r["config"], r["suite"], int(r["seed"]))):
         episodes = sum(t["episodes"] for t in r["tasks"].values())
         rows.append([r["config"], r["suite"], str(r["seed"]), str(r.get("steps", MISSING)),
-                     _training_minutes(r, runs_dir),
+                     _training_minutes(r, runs_dir, training_logs),
                      f"{r['eval_wall_s'] / 60:.0f}" if r.get("eval_wall_s") else MISSING, str(episodes)])
         cmd = r.get("commands") or {}
         if cmd.get("train") and not r.get("checkpoint_from"):
