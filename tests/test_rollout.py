@@ -37,9 +37,12 @@ TASK = "pick up the red cube"  # an SO-101 training task of `prepare("so101")`
 
 
 def rollout(*args: str) -> subprocess.CompletedProcess:
+    """`lerobot-rollout` with one intra-op thread, as `one_thread` gives the replays here: a second thread splits
+    the front end's sums differently, and error regression's Adam steps grow that rounding (1e-6 to 1e-3 in 15
+    ticks), so the rollout's actions equal a replay's only at the same thread count."""
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"}
     return subprocess.run([str(BIN / "lerobot-rollout"), *args, "--play_sounds=false",
-                           "--return_to_initial_position=false"],
-                          capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"}, timeout=300)
+                           "--return_to_initial_position=false"], capture_output=True, text=True, env=env, timeout=300)
 
 
 @pytest.fixture(autouse=True)
