@@ -26,9 +26,12 @@ build: $(STAMP)
 
 install: $(STAMP) sysdeps build
 
-# The whole suite, simulator included (what CI runs).
+# The whole suite, simulator included (what CI runs), in TEST_WORKERS pytest processes with one intra-op thread
+# each (most tests wait on a one-core subprocess or the simulator); a test module stays on one worker, so its
+# module-scoped lerobot-train fixture runs once. TEST_WORKERS=0 runs it in this process.
+TEST_WORKERS ?= 2
 test: install libero
-	$(PY) -m pytest -q tests
+	OMP_NUM_THREADS=1 $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadscope tests
 
 # Without the simulator and without subprocess training: under 2 minutes on 2 idle cores.
 test-fast: install
