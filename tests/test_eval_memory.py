@@ -55,6 +55,34 @@ def test_sub_environments_share_one_render_context_with_robosuites_pixels():
     venv.close()
 
 
+def test_a_robosuite_renderer_freed_later_leaves_the_shared_context_intact():
+    """robosuite frees a renderer's MuJoCo context without making its own GL context current: it deletes
+    textures and buffers by number in whichever context is current. The shared context is released after each
+    image, so a robosuite environment collected after it drew (an earlier test's, in a test runner) changes
+    nothing it draws."""
+    import gc
+
+    from libero.libero.envs import OffScreenRenderEnv
+
+    from lerobot_predvla.envs.configs import PredVLALiberoEnv
+
+    venv = PredVLALiberoEnv(task=SUITE, task_ids=[0]).create_envs(n_envs=1)[SUITE][0]
+    venv.reset(seed=[0])
+    sub_env = venv.envs[0]
+    before = sub_env._render_cameras()
+    reference = OffScreenRenderEnv(bddl_file_name=sub_env._task_bddl_file, camera_heights=128, camera_widths=128)
+    reference.reset()
+    assert all(np.array_equal(image, before[k]) for k, image in sub_env._render_cameras().items())
+    reference.close()
+    del reference
+    gc.collect()  # robosuite's MjRenderContext.__del__ frees its MuJoCo context here
+    after = sub_env._render_cameras()
+    for camera, image in before.items():
+        assert image.std() > 0
+        np.testing.assert_array_equal(after[camera], image, err_msg=camera)
+    venv.close()
+
+
 def test_a_further_environment_costs_a_fraction_of_robosuites_renderer(tmp_path):
     """The per-environment cost: the peak resident memory of a fresh process with two reset and stepped environments,
     against one with five (benchmarks/bench_eval_memory.py's child, as docs/speed.md's table measures it). Two, not

@@ -13,6 +13,7 @@ other sub-environments and the run go on. Faults are kept in `faults` and listed
 
 import atexit
 import logging
+import sys
 import threading
 import zlib
 from functools import partial
@@ -54,13 +55,29 @@ def render_assets_key(model: mujoco.MjModel) -> str:
     return "\n".join(parts)
 
 
+def release_gl_context(gl) -> None:
+    """Leave no GL context current on this thread; `gl` is the robosuite GL context that is (EGL or OSMesa, the
+    headless backends; another backend's context stays current). GL calls without a current context do nothing."""
+    backend = sys.modules[type(gl).__module__]  # robosuite's module for MUJOCO_GL, loaded with `GLContext`
+    if backend.__name__.endswith(".egl_context"):
+        backend.EGL.eglMakeCurrent(backend.EGL_DISPLAY, backend.EGL.EGL_NO_SURFACE, backend.EGL.EGL_NO_SURFACE,
+                                   backend.EGL.EGL_NO_CONTEXT)
+    elif backend.__name__.endswith(".osmesa_context"):
+        from OpenGL import GL, osmesa  # PyOpenGL's OSMesa platform, which MUJOCO_GL=osmesa selected
+
+        osmesa.OSMesaMakeCurrent(None, None, GL.GL_FLOAT, 0, 0)
+
+
 class SharedRenderer:
     """One GL context and one MuJoCo render context for every simulator of the process.
 
     Draws exactly as robosuite's `MjRenderContextOffscreen.render` + `read_pixels` (same scene size, camera,
     visual/collision geom groups, offscreen buffer and font scale), for any model whose `render_assets_key`
     matches the context's; a model with other assets (the next task) replaces the context. The GL context is
-    made current at every call: robosuite never does, so it drew with whichever context was created last.
+    made current at every call (robosuite never does, so it drew with whichever context was created last) and
+    released after it: robosuite frees a renderer's MuJoCo context (`MjRenderContext.__del__`,
+    `update_offscreen_size`) without making its own GL context current, which would delete this context's
+    textures and buffers by their numbers in whichever context is current.
     """
 
     MAX_GEOMS = 1000  # robosuite's MjvScene size
@@ -113,6 +130,7 @@ class SharedRenderer:
             mujoco.mjr_render(viewport, self._scene, self._context)
             image = np.empty((height, width, 3), dtype=np.uint8)
             mujoco.mjr_readPixels(image, None, viewport, self._context)
+            release_gl_context(self._gl)
         return image
 
     def close(self) -> None:
@@ -122,6 +140,7 @@ class SharedRenderer:
                 self._gl.make_current()
                 if self._context is not None:
                     self._context.free()
+                release_gl_context(self._gl)
                 self._gl.free()
             self._gl, self._context, self._scene, self._key = None, None, None, None
 
