@@ -57,12 +57,13 @@ def test_sub_environments_share_one_render_context_with_robosuites_pixels():
 
 def test_a_robosuite_renderer_freed_later_leaves_the_shared_context_intact():
     """robosuite frees a renderer's MuJoCo context without making its own GL context current: it deletes
-    textures and buffers by number in whichever context is current. The shared context is released after each
-    image, so a robosuite environment collected after it drew (an earlier test's, in a test runner) changes
-    nothing it draws."""
+    textures and buffers by number in whichever context is current. The shared context is current only on its own
+    thread, so a robosuite environment collected after it drew (an earlier test's, in a test runner) changes
+    nothing it draws, and robosuite's renderer still draws with its own context (it never makes it current)."""
     import gc
 
     from libero.libero.envs import OffScreenRenderEnv
+    from robosuite import macros
 
     from lerobot_predvla.envs.configs import PredVLALiberoEnv
 
@@ -73,6 +74,10 @@ def test_a_robosuite_renderer_freed_later_leaves_the_shared_context_intact():
     reference = OffScreenRenderEnv(bddl_file_name=sub_env._task_bddl_file, camera_heights=128, camera_widths=128)
     reference.reset()
     assert all(np.array_equal(image, before[k]) for k, image in sub_env._render_cameras().items())
+    reference.set_init_state(sub_env._env.get_sim_state())  # robosuite's renderer, its context not made current
+    flip = -1 if macros.IMAGE_CONVENTION == "opencv" else 1
+    expected = reference.env.sim.render(camera_name="agentview", width=128, height=128)[::flip]
+    np.testing.assert_array_equal(expected, before["agentview_image"])
     reference.close()
     del reference
     gc.collect()  # robosuite's MjRenderContext.__del__ frees its MuJoCo context here

@@ -13,9 +13,10 @@ other sub-environments and the run go on. Faults are kept in `faults` and listed
 
 import atexit
 import logging
-import sys
+import queue
 import threading
 import zlib
+from concurrent.futures import Future
 from functools import partial
 
 import gymnasium as gym
@@ -55,17 +56,39 @@ def render_assets_key(model: mujoco.MjModel) -> str:
     return "\n".join(parts)
 
 
-def release_gl_context(gl) -> None:
-    """Leave no GL context current on this thread; `gl` is the robosuite GL context that is (EGL or OSMesa, the
-    headless backends; another backend's context stays current). GL calls without a current context do nothing."""
-    backend = sys.modules[type(gl).__module__]  # robosuite's module for MUJOCO_GL, loaded with `GLContext`
-    if backend.__name__.endswith(".egl_context"):
-        backend.EGL.eglMakeCurrent(backend.EGL_DISPLAY, backend.EGL.EGL_NO_SURFACE, backend.EGL.EGL_NO_SURFACE,
-                                   backend.EGL.EGL_NO_CONTEXT)
-    elif backend.__name__.endswith(".osmesa_context"):
-        from OpenGL import GL, osmesa  # PyOpenGL's OSMesa platform, which MUJOCO_GL=osmesa selected
+class GLThread:
+    """One daemon thread that runs every GL call of the shared renderer.
 
-        osmesa.OSMesaMakeCurrent(None, None, GL.GL_FLOAT, 0, 0)
+    A GL context is current per thread, and robosuite relies on the calling thread's current context: its
+    renderers draw with whichever context was made current last (their own, at creation) and free their MuJoCo
+    context (`MjRenderContext.__del__`) without making their GL context current, deleting textures and buffers by
+    number in whichever context is. On its own thread the shared context is never the main thread's current
+    one, so neither can touch the other's (tests/test_eval_memory.py). A daemon thread still runs during `atexit`
+    handlers, where the renderer is closed.
+    """
+
+    def __init__(self):
+        self._calls: queue.SimpleQueue = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._start_lock = threading.Lock()
+
+    def call(self, function, *args):
+        """`function(*args)` on the GL thread; its result, or its exception raised here."""
+        with self._start_lock:
+            if self._thread is None or not self._thread.is_alive():  # not started, or a forked child's
+                self._thread = threading.Thread(target=self._serve, name="predvla-gl", daemon=True)
+                self._thread.start()
+        result = Future()
+        self._calls.put((function, args, result))
+        return result.result()
+
+    def _serve(self) -> None:
+        while True:
+            function, args, result = self._calls.get()
+            try:
+                result.set_result(function(*args))
+            except BaseException as error:  # handed to the caller, which raises it
+                result.set_exception(error)
 
 
 class SharedRenderer:
@@ -73,17 +96,14 @@ class SharedRenderer:
 
     Draws exactly as robosuite's `MjRenderContextOffscreen.render` + `read_pixels` (same scene size, camera,
     visual/collision geom groups, offscreen buffer and font scale), for any model whose `render_assets_key`
-    matches the context's; a model with other assets (the next task) replaces the context. The GL context is
-    made current at every call (robosuite never does, so it drew with whichever context was created last) and
-    released after it: robosuite frees a renderer's MuJoCo context (`MjRenderContext.__del__`,
-    `update_offscreen_size`) without making its own GL context current, which would delete this context's
-    textures and buffers by their numbers in whichever context is current.
+    matches the context's; a model with other assets (the next task) replaces the context. Every GL call runs
+    on one `GLThread`, where this context is the only one ever made current.
     """
 
     MAX_GEOMS = 1000  # robosuite's MjvScene size
 
     def __init__(self):
-        self._lock = threading.Lock()
+        self._thread = GLThread()
         self._gl = None
         self._key: str | None = None
         self._context: mujoco.MjrContext | None = None
@@ -98,10 +118,10 @@ class SharedRenderer:
     def _bind(self, model: mujoco.MjModel, key: str, width: int, height: int) -> None:
         if self._gl is None:  # robosuite's context class for MUJOCO_GL (it ignores the size arguments)
             self._gl = GLContext(max_width=width, max_height=height, device_id=-1)
+            self._gl.make_current()
             # robosuite registers the display's termination with the first context; atexit runs last-first, so
             # this frees the contexts before it (else robosuite's __del__ prints a traceback at exit).
             atexit.register(self.close)
-        self._gl.make_current()
         if key == self._key and width <= self._context.offWidth and height <= self._context.offHeight:
             return
         if self._context is not None:
@@ -118,31 +138,32 @@ class SharedRenderer:
     def render(self, env, key: str, camera: str, width: int, height: int) -> np.ndarray:
         """RGB image (height, width, 3) of robosuite env `env`'s camera `camera`, bottom row first (OpenGL);
         `key` is `render_assets_key` of its model."""
+        return self._thread.call(self._render, env, key, camera, width, height)
+
+    def _render(self, env, key: str, camera: str, width: int, height: int) -> np.ndarray:
         model, data = env.sim.model._model, env.sim.data._data
-        with self._lock:
-            self._bind(model, key, width, height)
-            self._camera.fixedcamid = env.sim.model.camera_name2id(camera)
-            self._option.geomgroup[0] = 1 if env.render_collision_mesh else 0
-            self._option.geomgroup[1] = 1 if env.render_visual_mesh else 0
-            mujoco.mjv_updateScene(model, data, self._option, self._perturb, self._camera,
-                                   mujoco.mjtCatBit.mjCAT_ALL, self._scene)
-            viewport = mujoco.MjrRect(0, 0, width, height)
-            mujoco.mjr_render(viewport, self._scene, self._context)
-            image = np.empty((height, width, 3), dtype=np.uint8)
-            mujoco.mjr_readPixels(image, None, viewport, self._context)
-            release_gl_context(self._gl)
+        self._bind(model, key, width, height)
+        self._camera.fixedcamid = env.sim.model.camera_name2id(camera)
+        self._option.geomgroup[0] = 1 if env.render_collision_mesh else 0
+        self._option.geomgroup[1] = 1 if env.render_visual_mesh else 0
+        mujoco.mjv_updateScene(model, data, self._option, self._perturb, self._camera,
+                               mujoco.mjtCatBit.mjCAT_ALL, self._scene)
+        viewport = mujoco.MjrRect(0, 0, width, height)
+        mujoco.mjr_render(viewport, self._scene, self._context)
+        image = np.empty((height, width, 3), dtype=np.uint8)
+        mujoco.mjr_readPixels(image, None, viewport, self._context)
         return image
 
     def close(self) -> None:
         """Free the render context and the GL context (at exit, or to start again)."""
-        with self._lock:
-            if self._gl is not None:
-                self._gl.make_current()
-                if self._context is not None:
-                    self._context.free()
-                release_gl_context(self._gl)
-                self._gl.free()
-            self._gl, self._context, self._scene, self._key = None, None, None, None
+        self._thread.call(self._close)
+
+    def _close(self) -> None:
+        if self._gl is not None:
+            if self._context is not None:
+                self._context.free()
+            self._gl.free()
+        self._gl, self._context, self._scene, self._key = None, None, None, None
 
 
 RENDERER = SharedRenderer()
