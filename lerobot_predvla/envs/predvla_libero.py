@@ -118,10 +118,10 @@ class SharedRenderer:
     def _bind(self, model: mujoco.MjModel, key: str, width: int, height: int) -> None:
         if self._gl is None:  # robosuite's context class for MUJOCO_GL (it ignores the size arguments)
             self._gl = GLContext(max_width=width, max_height=height, device_id=-1)
-            self._gl.make_current()
             # robosuite registers the display's termination with the first context; atexit runs last-first, so
             # this frees the contexts before it (else robosuite's __del__ prints a traceback at exit).
             atexit.register(self.close)
+        self._gl.make_current()  # at every call: a forked child's GL thread is a new one (GLThread.call)
         if key == self._key and width <= self._context.offWidth and height <= self._context.offHeight:
             return
         if self._context is not None:
