@@ -332,6 +332,28 @@ def test_baselines_learning_rates_from_the_sweeps_selection(runs, tmp_path):
     assert "| B2 | object | -3.250 | -4.500 | — | 0.001 | 10,000 | 3 |" in text
 
 
+def test_baselines_learning_rates_of_a_sweep_still_running(runs, tmp_path):
+    """Before the selection exists, the finished candidates (RUNS_DIR/lr_sweep/<config>/<suite>/lr<rate>.json) show
+    as a pending row; the selection, once written, replaces them."""
+    import shutil
+
+    runs_copy = tmp_path / "runs"
+    shutil.copytree(runs, runs_copy)
+    folder = runs_copy / "lr_sweep" / "B1" / "libero_object"
+    folder.mkdir(parents=True)
+    for rate, loss in ((0.0001, -13.39), (0.0003, -13.64)):
+        (folder / f"lr{rate:g}.json").write_text(json.dumps({"lr": rate, "heldout_nll": loss, "steps": 10000}))
+    write_report(runs_copy, tmp_path / "report")
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert f"| B1 | object | -13.390 | -13.640 | pending (2 candidates done) | 10,000 | {MISSING} |" in text
+    selection = {"config": "B1", "suite": "libero_object", "heldout_nll": {"0.0001": -13.39, "0.0003": -13.64},
+                 "chosen_lr": 0.0003, "steps": 10000, "heldout_episodes": {"0": [45, 46]}}
+    (folder.parent / "libero_object.json").write_text(json.dumps(selection))
+    write_report(runs_copy, tmp_path / "report")
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "| B1 | object | -13.390 | -13.640 | 0.0003 | 10,000 | 2 |" in text and "pending" not in text
+
+
 def test_fresh_clone_section_names_what_is_read_and_what_is_redone(tmp_path, monkeypatch):
     """A training whose record names a model outside the runs dir's train/ is read from there; one whose checkpoint
     lies in train/ is redone; data stages are recomputed, with their recorded time."""

@@ -53,6 +53,7 @@ PUBLISHED_REFERENCES = (
 )
 PARAMETERLESS_REFERENCES = (("Diffusion Policy", 72.4),)  # its parameter count is not given with the result
 MISSING = "—"
+NOT_RUN = "not run yet"  # a learning-rate candidate of a sweep still running
 START_SPREAD_FILE = "start_spread.json"  # beside the report: `python -m lerobot_predvla.libero.start_spread --demos`
 INSPECT_DIR = "inspect"  # beside the report: inspect/seed<N>/ from `predvla inspect <train dir> --every N`
 CURVES_FIGURE = "training_curves.png"
@@ -865,20 +866,36 @@ def mechanism_section(out: Path) -> list[str]:
 
 def lr_selection_section(runs_dir: Path) -> list[str]:
     """The baselines' learning rates, chosen on held-out demonstrations (`RUNS_DIR/lr_sweep/<config>/<suite>.json`
-    of `predvla sweep`)."""
-    found = sorted((Path(runs_dir) / LR_SWEEP_DIR).glob("*/*.json"))
-    if not found:
+    of `predvla sweep`); a sweep still running shows its finished candidates
+    (`RUNS_DIR/lr_sweep/<config>/<suite>/lr<rate>.json`)."""
+    root = Path(runs_dir) / LR_SWEEP_DIR
+    selections = [json.loads(path.read_text()) for path in sorted(root.glob("*/*.json"))]
+    chosen_for = {(sel["config"], sel["suite"]) for sel in selections}
+    for folder in sorted(path for path in root.glob("*/*") if path.is_dir()):
+        config, suite = folder.parent.name, folder.name
+        candidates = [json.loads(path.read_text()) for path in sorted(folder.glob("lr*.json"))]
+        if (config, suite) in chosen_for or not candidates:
+            continue
+        selections.append({"config": config, "suite": suite, "steps": candidates[0]["steps"],
+                           "heldout_nll": {f"{c['lr']:g}": c["heldout_nll"] for c in candidates}})
+    if not selections:
         return []
-    selections = [json.loads(path.read_text()) for path in found]
     rates = sorted({rate for sel in selections for rate in sel["heldout_nll"]}, key=float)
-    rows = [[sel["config"], SUITE_LABELS.get(sel["suite"], sel["suite"]),
-             *[MISSING if sel["heldout_nll"].get(r) is None else f"{sel['heldout_nll'][r]:.3f}" for r in rates],
-             f"{sel['chosen_lr']:g}", f"{sel['steps']:,}",
-             str(sum(len(v) for v in sel["heldout_episodes"].values()))] for sel in selections]
+
+    def nll(sel: dict, rate: str) -> str:
+        if rate not in sel["heldout_nll"]:
+            return NOT_RUN
+        return MISSING if sel["heldout_nll"][rate] is None else f"{sel['heldout_nll'][rate]:.3f}"
+
+    rows = [[sel["config"], SUITE_LABELS.get(sel["suite"], sel["suite"]), *[nll(sel, r) for r in rates],
+             f"{sel['chosen_lr']:g}" if "chosen_lr" in sel else f"pending ({len(sel['heldout_nll'])} candidates done)",
+             f"{sel['steps']:,}",
+             str(sum(len(v) for v in sel["heldout_episodes"].values())) if "heldout_episodes" in sel else MISSING]
+            for sel in selections]
     return ["", "## Baselines' learning rates", "",
             "Each baseline's learning rate is the one of lowest action NLL on held-out demonstrations (LeRobot's "
             "`--dataset.eval_split`), never on the evaluation's init states; the candidates train on the other "
-            f"demonstrations ({MISSING}: diverged).", "",
+            f"demonstrations ({MISSING}: diverged; {NOT_RUN}: a candidate of a sweep still running).", "",
             _table(["config", "suite", *[f"NLL at lr {r}" for r in rates], "chosen", "candidate steps",
                     "held-out demonstrations"], rows)]
 
