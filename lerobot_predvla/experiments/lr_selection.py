@@ -11,6 +11,7 @@ rate. Each candidate's result and the selection are JSON files under RUNS_DIR/lr
 re-run skips what is done (the candidates' trainings resume like any other).
 """
 
+import json
 import math
 import re
 from dataclasses import dataclass
@@ -19,6 +20,7 @@ from pathlib import Path
 from lerobot_predvla.policies.common.training_guard import NONFINITE_STOP
 
 LR_SWEEP_DIR = "lr_sweep"
+CANDIDATE_PREFIX = "lr"  # lr0.0003: a candidate's run-name suffix and result file stem
 CRITERION = ("lowest policy loss (action NLL) on held-out demonstrations at the candidate's last step, "
              "LeRobot's eval_loss with --dataset.eval_split")
 # What a dry run prints for the learning rate of a training whose selection has not run yet.
@@ -67,7 +69,7 @@ class LRSweep:
 
 def candidate_label(rate: float) -> str:
     """`lr0.0003`: the rate as it appears in run names and file names."""
-    return f"lr{float(rate):g}"
+    return f"{CANDIDATE_PREFIX}{float(rate):g}"
 
 
 def candidate_name(config: str, rate: float) -> str:
@@ -83,6 +85,19 @@ def selection_path(runs_dir: Path, config: str, suite: str) -> Path:
 def candidate_path(runs_dir: Path, config: str, suite: str, rate: float) -> Path:
     """One candidate's result, written when its training and held-out loss are done."""
     return Path(runs_dir) / LR_SWEEP_DIR / config / suite / f"{candidate_label(rate)}.json"
+
+
+def pending_selections(runs_dir: Path) -> list[dict]:
+    """Sweeps still running: for each configuration and suite whose selection is not written yet, its finished
+    candidates in the selection's own keys (`config`, `suite`, `steps`, `heldout_nll` by rate as `f"{rate:g}"`)."""
+    found = []
+    for folder in sorted(path for path in (Path(runs_dir) / LR_SWEEP_DIR).glob("*/*") if path.is_dir()):
+        config, suite = folder.parent.name, folder.name
+        candidates = [json.loads(path.read_text()) for path in sorted(folder.glob(f"{CANDIDATE_PREFIX}*.json"))]
+        if candidates and not selection_path(runs_dir, config, suite).is_file():
+            found.append({"config": config, "suite": suite, "steps": candidates[0]["steps"],
+                          "heldout_nll": {f"{c['lr']:g}": c["heldout_nll"] for c in candidates}})
+    return found
 
 
 def heldout_losses(log: Path) -> dict[int, float]:

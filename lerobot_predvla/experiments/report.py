@@ -28,7 +28,7 @@ from scipy.stats import binomtest
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
 from lerobot_predvla.experiments.logs import TrainingRun, training_runs
-from lerobot_predvla.experiments.lr_selection import LR_SWEEP_DIR
+from lerobot_predvla.experiments.lr_selection import LR_SWEEP_DIR, pending_selections
 from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE, eval_run_dir, run_log_path
 from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
@@ -868,16 +868,8 @@ def lr_selection_section(runs_dir: Path) -> list[str]:
     """The baselines' learning rates, chosen on held-out demonstrations (`RUNS_DIR/lr_sweep/<config>/<suite>.json`
     of `predvla sweep`); a sweep still running shows its finished candidates
     (`RUNS_DIR/lr_sweep/<config>/<suite>/lr<rate>.json`)."""
-    root = Path(runs_dir) / LR_SWEEP_DIR
-    selections = [json.loads(path.read_text()) for path in sorted(root.glob("*/*.json"))]
-    chosen_for = {(sel["config"], sel["suite"]) for sel in selections}
-    for folder in sorted(path for path in root.glob("*/*") if path.is_dir()):
-        config, suite = folder.parent.name, folder.name
-        candidates = [json.loads(path.read_text()) for path in sorted(folder.glob("lr*.json"))]
-        if (config, suite) in chosen_for or not candidates:
-            continue
-        selections.append({"config": config, "suite": suite, "steps": candidates[0]["steps"],
-                           "heldout_nll": {f"{c['lr']:g}": c["heldout_nll"] for c in candidates}})
+    selections = [json.loads(path.read_text()) for path in sorted((Path(runs_dir) / LR_SWEEP_DIR).glob("*/*.json"))]
+    selections += pending_selections(runs_dir)
     if not selections:
         return []
     rates = sorted({rate for sel in selections for rate in sel["heldout_nll"]}, key=float)
