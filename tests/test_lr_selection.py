@@ -117,7 +117,7 @@ def test_the_lowest_heldout_loss_wins_and_every_stage_is_skipped_once_done(tmp_p
         runner.record_path(Run("B2", SUITE, seed)).unlink()
     again = FakeTrainer({})
     runner.execute = again
-    assert runner.pending_commands(None, (0, 1))[0] == runner.resume_command(runner.train_dir("B2", SUITE, 0))
+    assert runner.pending_commands(None, (0, 1))[0] == runner.resume_command(runner.train_dir("B2", SUITE, 0), SUITE)
     assert runner.select_lr(runner.sweep.configs["B2"], SUITE) == 1e-3 and again.commands == []
 
 

@@ -686,3 +686,27 @@ def test_machine_names_the_processor_its_cores_and_bf16(tmp_path):
     cpuinfo.write_text("model name\t: AMD EPYC\nflags\t\t: fpu avx2\n")
     assert machine(cpuinfo).endswith("AVX-512 bf16: no") and machine(cpuinfo).startswith("AMD EPYC, ")
     assert "logical CPUs" in machine(tmp_path / "absent")
+
+
+def test_training_reads_the_features_only_copy(tmp_path):
+    """`datasets.<suite>.train_root`: made from `root` by `predvla features-only` when missing; training reads it."""
+    datasets = {s: {"repo_id": f"local/{s}", "root": f"data/{s}", "train_root": f"data/{s}_features"}
+                for s in ("libero_object", "libero_spatial")}
+    runner = Runner(Sweep.load(sweep_file(tmp_path, datasets=datasets)), tmp_path / "runs")
+    root, copy = tmp_path / "data" / "libero_object", tmp_path / "data" / "libero_object_features"
+    (stage, command), = runner.data_commands("libero_object")
+    assert stage == "features_only" and command[command.index("features-only"):] == [
+        "features-only", "--dataset-root", str(root), "--out", str(copy), "--repo-id", "local/libero_object"]
+    train = runner.train_command(runner.sweep.configs["predvla"], "libero_object", 0)
+    assert arg(train, "dataset.root") == str(copy) and arg(train, "dataset.repo_id") == "local/libero_object"
+    (copy / "meta").mkdir(parents=True)
+    (copy / "meta" / "info.json").write_text("{}")
+    assert runner.data_commands("libero_object") == []
+    # A training started on `root` resumes onto the copy (a command-line flag overrides its train_config.json).
+    last = runner.train_dir("predvla", "libero_object", 0) / "checkpoints" / "last" / "pretrained_model"
+    last.mkdir(parents=True)
+    (last / "train_config.json").write_text("{}")
+    resume = runner.pending_train_command(runner.sweep.configs["predvla"], "libero_object", 0)
+    assert arg(resume, "resume") == "true" and arg(resume, "dataset.root") == str(copy)
+    with pytest.raises(SweepError, match="train_root"):
+        Sweep.load(sweep_file(tmp_path, datasets={**datasets, "libero_object": {"repo_id": "x", "train_root": "y"}}))

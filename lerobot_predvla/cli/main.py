@@ -15,6 +15,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.cli.demos",
     "lerobot_predvla.cli.fit_frontend",
     "lerobot_predvla.cli.convert",
+    "lerobot_predvla.cli.features_only",
     "lerobot_predvla.cli.inspect",
     "lerobot_predvla.cli.trace",
     "lerobot_predvla.cli.sweep",

@@ -189,7 +189,9 @@ class Settings:
 
     seeds: list[int] = field(default_factory=lambda: [0])
     suites: list[str] = field(default_factory=lambda: list(SUITES))
-    datasets: dict[str, dict] = field(default_factory=dict)  # suite -> {repo_id, root}
+    # suite -> {repo_id, root, train_root}. train_root (optional): training reads this copy of `root` without camera
+    # frames (`predvla features-only`, made when missing): the same samples and updates, no video decoding.
+    datasets: dict[str, dict] = field(default_factory=dict)
     steps: int = PAPER_TRAIN_STEPS
     batch_size: int = PAPER_BATCH_SIZE
     save_freq: int = 5_000
@@ -378,6 +380,10 @@ class Sweep:
         for suite in self.settings.data:
             if not self.settings.datasets.get(suite, {}).get("root"):
                 raise SweepError(f"{where}: `data` makes {suite}'s dataset, so `datasets.{suite}` needs a `root`.")
+        for suite, entry in self.settings.datasets.items():
+            if entry.get("train_root") and not entry.get("root"):
+                raise SweepError(f"{where}: `datasets.{suite}.train_root` is copied from a local dataset: give "
+                                 "its `root` too.")
 
     def validate_pool(self, spec: ConfigSpec, where: Path) -> None:
         target = self.configs[spec.pool_with]
@@ -551,7 +557,8 @@ class Runner:
             *self.launcher(),
             *spec.policy_args(self.sweep.base_dir, suite),
             f"--dataset.repo_id={dataset['repo_id']}",
-            *([f"--dataset.root={self._path(dataset['root'])}"] if dataset.get("root") else []),
+            *([f"--dataset.root={self._path(dataset.get('train_root') or dataset['root'])}"]
+              if dataset.get("root") else []),
             f"--output_dir={self.train_dir(spec.name, suite, seed)}",
             f"--job_name={spec.name}_{suite}_seed{seed}",
             f"--seed={seed}",
@@ -565,9 +572,14 @@ class Runner:
             *spec.train_args,
         ]
 
-    def resume_command(self, train_dir: Path) -> list[str]:
+    def resume_command(self, train_dir: Path, suite: str) -> list[str]:
+        """Resume from the last checkpoint, with its own train_config.json; a sweep that names a `train_root`
+        points the resumed training at it (LeRobot lets command-line flags override a resumed config): the same
+        samples without camera frames, for trainings started before the copy existed."""
         config = last_pretrained(train_dir) / "train_config.json"
-        return [*self.launcher(), f"--config_path={config}", "--resume=true"]
+        train_root = self.sweep.settings.datasets[suite].get("train_root")
+        return [*self.launcher(), f"--config_path={config}", "--resume=true",
+                *([f"--dataset.root={self._path(train_root)}"] if train_root else [])]
 
     def eval_command(self, run: Run, checkpoint: Path) -> list[str]:
         s = self.sweep.settings
@@ -609,7 +621,21 @@ class Runner:
 
     # ----- data ------------------------------------------------------------------------------------------
     def data_commands(self, suite: str) -> list[tuple[str, list[str]]]:
-        """(stage, command) still to run to make `suite`'s dataset; empty when it exists or has no `data` entry."""
+        """(stage, command) still to run to make `suite`'s datasets: its `root` from the `data` entry, then its
+        `train_root` copy without camera frames; empty when they exist (or nothing says how to make them)."""
+        predvla = [sys.executable, "-m", "lerobot_predvla.cli.main"]
+        entry = self.sweep.settings.datasets[suite]
+        commands = self.source_data_commands(suite, predvla)
+        train_root = entry.get("train_root")
+        if train_root and not (self._path(train_root) / "meta" / "info.json").is_file():
+            commands.append(("features_only", [
+                *predvla, "features-only", "--dataset-root", str(self._path(entry["root"])),
+                "--out", str(self._path(train_root)), "--repo-id", entry["repo_id"],
+            ]))
+        return commands
+
+    def source_data_commands(self, suite: str, predvla: list[str]) -> list[tuple[str, list[str]]]:
+        """(stage, command) still to run to make `suite`'s `root` dataset from its `data` entry."""
         spec = self.sweep.settings.data.get(suite)
         if spec is None:
             return []
@@ -617,7 +643,6 @@ class Runner:
         if (dataset / "meta" / "info.json").is_file():
             return []
         hdf5, frontend = self._path(spec.hdf5), self._path(spec.frontend)
-        predvla = [sys.executable, "-m", "lerobot_predvla.cli.main"]
         commands = []
         missing = self.missing_demo_tasks(suite, spec, hdf5)
         if missing:
@@ -734,7 +759,7 @@ class Runner:
         """A training's resume command when it has a checkpoint, else its command from the start."""
         out = self.train_dir(spec.name, suite, seed)
         if (last_pretrained(out) / "train_config.json").is_file():
-            return self.resume_command(out)
+            return self.resume_command(out, suite)
         return self.train_command(spec, suite, seed)
 
     def pending_lr_commands(self, spec: ConfigSpec, suite: str) -> list[list[str]]:
@@ -791,7 +816,7 @@ class Runner:
             return None
         last = last_pretrained(out)
         if (last / "train_config.json").is_file():
-            command, resumed = self.resume_command(out), True
+            command, resumed = self.resume_command(out, suite), True
         else:
             shutil.rmtree(out, ignore_errors=True)  # started but no checkpoint yet: lerobot-train needs a new dir
             command, resumed = self.train_command(spec, suite, seed), False
