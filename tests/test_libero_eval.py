@@ -114,6 +114,24 @@ def test_predvla_trace_records_error_regression_in_the_simulator(checkpoint, tmp
     assert bad.returncode == 2 and f"--compare {tmp_path}" in bad.stderr and not (tmp_path / "x").exists()
 
 
+def test_rendering_only_at_reset_changes_no_action_that_ignores_vision(checkpoint, tmp_path):
+    """Exact open loop and A4 (`er_lambda_v=0`) read no camera frame after reset, so their sweeps evaluate with
+    `--env.render_interval=100000`: the same actions, bit for bit. Error regression with vision is the control."""
+    eval_args = [f"--policy.path={checkpoint}", "--env.type=predvla_libero", f"--env.task={SUITE}",
+                 "--env.task_ids=[0]", f"--env.episode_length={EPISODE_STEPS}", "--eval.n_episodes=1",
+                 "--eval.batch_size=1", "--eval.use_async_envs=false", "--policy.device=cpu"]
+
+    def actions(name: str, *extra: str) -> list:
+        run([str(BIN / "predvla"), "trace", str(tmp_path / name), *eval_args, *extra])
+        return json.loads((tmp_path / name / "trace.json").read_text())["episodes"][0]["action"]
+
+    sparse = "--env.render_interval=100000"
+    for variant in ("--policy.er_lambda_v=0.0", "--policy.er_iterations=0"):
+        assert actions(f"{variant}_rendered", variant) == actions(f"{variant}_sparse", variant, sparse), variant
+    rendered, held = actions("er_rendered"), actions("er_sparse", sparse)
+    assert rendered[:4] == held[:4] and rendered[4:] != held[4:]  # the first refresh after reset is step 4
+
+
 def test_predvla_libero_env_observations():
     """Fresh images every 4th step equal the demonstrations' render of the same state; proprio is joints+gripper."""
     from lerobot.envs.utils import preprocess_observation
