@@ -31,7 +31,8 @@ def features_only_copy(root: Path | str, out: Path | str, repo_id: str | None = 
         raise FileExistsError(f"{out} already exists; choose a new --out or remove it.")
     if not (root / "meta" / "info.json").is_file():
         raise FileNotFoundError(f"{root / 'meta' / 'info.json'} not found: --dataset-root must be a LeRobot dataset.")
-    dataset = LeRobotDataset(repo_id or f"local/{root.name}", root=root)
+    repo_id = repo_id or f"local/{out.name}"
+    dataset = LeRobotDataset(f"local/{root.name}", root=root)
     if OBS_VISION_FEATURES not in dataset.meta.features:
         raise ValueError(
             f"{root}: the dataset has no '{OBS_VISION_FEATURES}' column, so training needs its camera frames; "
@@ -43,7 +44,7 @@ def features_only_copy(root: Path | str, out: Path | str, repo_id: str | None = 
     try:
         target = staging / out.name
         if cameras:
-            remove_feature(dataset, cameras, output_dir=target, repo_id=repo_id or f"local/{out.name}")
+            remove_feature(dataset, cameras, output_dir=target, repo_id=repo_id)
         else:
             shutil.copytree(root, target)
         if (root / FRONTEND_META_DIR).is_dir() and not (target / FRONTEND_META_DIR).is_dir():
@@ -51,4 +52,4 @@ def features_only_copy(root: Path | str, out: Path | str, repo_id: str | None = 
         target.rename(out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    return LeRobotDataset(repo_id or f"local/{out.name}", root=out)
+    return LeRobotDataset(repo_id, root=out)

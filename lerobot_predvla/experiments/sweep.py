@@ -557,7 +557,7 @@ class Runner:
             *self.launcher(),
             *spec.policy_args(self.sweep.base_dir, suite),
             f"--dataset.repo_id={dataset['repo_id']}",
-            *([f"--dataset.root={self._path(dataset.get('train_root') or dataset['root'])}"]
+            *([f"--dataset.root={self.train_root(suite) or self._path(dataset['root'])}"]
               if dataset.get("root") else []),
             f"--output_dir={self.train_dir(spec.name, suite, seed)}",
             f"--job_name={spec.name}_{suite}_seed{seed}",
@@ -577,9 +577,14 @@ class Runner:
         points the resumed training at it (LeRobot lets command-line flags override a resumed config): the same
         samples without camera frames, for trainings started before the copy existed."""
         config = last_pretrained(train_dir) / "train_config.json"
-        train_root = self.sweep.settings.datasets[suite].get("train_root")
+        train_root = self.train_root(suite)
         return [*self.launcher(), f"--config_path={config}", "--resume=true",
-                *([f"--dataset.root={self._path(train_root)}"] if train_root else [])]
+                *([f"--dataset.root={train_root}"] if train_root else [])]
+
+    def train_root(self, suite: str) -> Path | None:
+        """The copy of `suite`'s dataset without camera frames that training reads, when the sweep names one."""
+        train_root = self.sweep.settings.datasets[suite].get("train_root")
+        return self._path(train_root) if train_root else None
 
     def eval_command(self, run: Run, checkpoint: Path) -> list[str]:
         s = self.sweep.settings
@@ -626,11 +631,11 @@ class Runner:
         predvla = [sys.executable, "-m", "lerobot_predvla.cli.main"]
         entry = self.sweep.settings.datasets[suite]
         commands = self.source_data_commands(suite, predvla)
-        train_root = entry.get("train_root")
-        if train_root and not (self._path(train_root) / "meta" / "info.json").is_file():
+        train_root = self.train_root(suite)
+        if train_root and not (train_root / "meta" / "info.json").is_file():
             commands.append(("features_only", [
                 *predvla, "features-only", "--dataset-root", str(self._path(entry["root"])),
-                "--out", str(self._path(train_root)), "--repo-id", entry["repo_id"],
+                "--out", str(train_root), "--repo-id", entry["repo_id"],
             ]))
         return commands
 
