@@ -2,9 +2,11 @@
 lerobot-train run through the runner; the posterior store under DistributedDataParallel (gloo, CPU)."""
 
 import argparse
+import faulthandler
 import json
 import os
 import time
+from datetime import timedelta
 from pathlib import Path
 
 import pytest
@@ -358,11 +360,16 @@ def _policy(dataset_root: str):
 
 
 RANK_EPISODES = ([0, 1], [1, 6])  # episode 1 is in both processes' batches
+DDP_TIMEOUT = timedelta(minutes=5)  # the workers finish in ~30 s on 2 cores beside a training
 
 
 def _ddp_worker(rank: int, world: int, init_file: str, dataset_root: str, out: str) -> None:
+    # A worker stuck past DDP_TIMEOUT prints every thread's stack and exits, so a hang fails with where it hung
+    # (mp.spawn then raises) instead of waiting for pytest-timeout, which sees only the parent's stack.
+    faulthandler.dump_traceback_later(DDP_TIMEOUT.total_seconds(), exit=True)
     torch.set_num_threads(1)
-    dist.init_process_group("gloo", init_method=f"file://{init_file}", rank=rank, world_size=world)
+    dist.init_process_group("gloo", init_method=f"file://{init_file}", rank=rank, world_size=world,
+                            timeout=DDP_TIMEOUT)
     policy = _policy(dataset_root)
     ddp = torch.nn.parallel.DistributedDataParallel(policy)
     optimizer = torch.optim.Adam(policy.get_optim_params(), lr=1e-3)
@@ -371,7 +378,9 @@ def _ddp_worker(rank: int, world: int, init_file: str, dataset_root: str, out: s
     optimizer.step()
     policy.update()  # exchanges only the two processes' batch rows and their gradients
     torch.save(policy.posterior_store.state(), os.path.join(out, f"rank{rank}.pt"))
+    dist.barrier()  # neither process tears the group down while the other may still be in a collective
     dist.destroy_process_group()
+    faulthandler.cancel_dump_traceback_later()
 
 
 @pytest.mark.slow
