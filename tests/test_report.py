@@ -188,6 +188,8 @@ def test_compared_runs_are_paired_episode_by_episode(tmp_path):
     pairs = summary["configs"]["ol"]["episodes"]["libero_object"]
     # seed 0: ol 3 successes, er 6; only ol 0, only er 3 (two on task 0, one on task 1).
     # seed 1: ol 4, er 4; only ol 1 (task 1), only er 1 (task 0). Seed 2 started elsewhere and is left out.
+    assert pairs.pop("tasks") == {"0": {"pairs": 8, "successes": 4, "against_successes": 7},
+                                  "1": {"pairs": 8, "successes": 3, "against_successes": 3}}
     assert pairs == {"against": "er", "seeds": [0, 1], "pairs": 16, "successes": 7, "against_successes": 10,
                      "only": 1, "only_against": 4, "sign_test_p": pytest.approx(2 * (1 + 5) / 32)}
     assert "episodes" not in summary["configs"]["er"]
@@ -195,6 +197,33 @@ def test_compared_runs_are_paired_episode_by_episode(tmp_path):
     assert sign_test(5, 1) == pytest.approx(2 * 7 / 64) and sign_test(10, 0) == pytest.approx(2 / 1024)
     text = (tmp_path / "report" / "report.md").read_text()
     assert "## Paired episodes" in text and "| ol | er | object | 0, 1 | 16 | 7 / 10 | 1 / 4 | 0.375 |" in text
+
+
+def test_the_per_task_ablation_figure_compares_the_same_episodes(tmp_path):
+    """An ablation run on the first 2 of the intact model's 4 episodes per task: its per-task change is taken on
+    those 2 pairs, not against the intact model's rate over all 4."""
+    from lerobot_predvla.experiments.report import paired_task_rates
+
+    runs = tmp_path / "runs"
+    outcomes = {"er": {0: [True, False, True, True], 1: [False, False, True, True]},
+                "a4": {0: [True, False], 1: [True, False]}}
+    for config, tasks in outcomes.items():
+        for task, successes in tasks.items():
+            part = runs / "eval" / config / "libero_object" / "seed0" / f"task{task}"
+            part.mkdir(parents=True)
+            write_eval_info(part, {task: successes})
+        atomic_write_json(runs / "records" / config / "libero_object" / "seed0.json", {
+            "config": config, "suite": "libero_object", "seed": 0, "label": config,
+            "group": "main" if config == "er" else "ablation", "compare_to": None if config == "er" else "er",
+            "eval_overrides": None if config == "er" else {"er_lambda_v": 0.0}, "eval_seed": 0,
+            "init_states": True, "n_episodes_per_task": len(tasks[0]), "episode_length": 600,
+            "tasks": {str(t): {"successes": sum(s), "episodes": len(s)} for t, s in tasks.items()}})
+    summary = write_report(runs, tmp_path / "report")
+    # Task 0: er 1 of its first 2, a4 1: no change (the rates over all episodes would say 50 - 75 = -25).
+    # Task 1: er 0 of its first 2, a4 1: +50 (the rates: 50 - 50 = 0).
+    assert paired_task_rates(summary, "a4", "er", "libero_object") == {"0": (50.0, 0.0), "1": (0.0, 50.0)}
+    assert paired_task_rates(summary, "a4", "other", "libero_object") is None
+    assert summary["figures"]["pertask"] == FIGURES["pertask"] and (tmp_path / "report" / FIGURES["pertask"]).is_file()
 
 
 def test_pooled_configurations_gather_their_seeds_and_paired_episodes(tmp_path):

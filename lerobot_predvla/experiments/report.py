@@ -285,6 +285,7 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
                            and (against, suite, seed) in by_run
                            and same_starts(r, by_run[(against, suite, seed)]))
             counts = {"pairs": 0, "successes": 0, "against_successes": 0, "only": 0, "only_against": 0}
+            tasks: dict[str, dict[str, int]] = {}  # the same counts per task: pairs, successes, against_successes
             for seed in seeds:
                 mine, theirs = (run_episodes(runs_dir, c, suite, seed) for c in (name, against))
                 for key in mine.keys() & theirs.keys():
@@ -294,10 +295,15 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
                     counts["against_successes"] += b
                     counts["only"] += a and not b
                     counts["only_against"] += b and not a
+                    task = tasks.setdefault(key[0], {"pairs": 0, "successes": 0, "against_successes": 0})
+                    task["pairs"] += 1
+                    task["successes"] += a
+                    task["against_successes"] += b
             if counts["pairs"]:
                 entry.setdefault("episodes", {})[suite] = {
                     "against": against, "seeds": seeds, **counts,
-                    "sign_test_p": sign_test(counts["only"], counts["only_against"])}
+                    "sign_test_p": sign_test(counts["only"], counts["only_against"]),
+                    "tasks": dict(sorted(tasks.items(), key=lambda item: int(item[0])))}
     for pool in summary.get("pooled", {}).values():
         for suite in summary["suites"]:
             parts = [e for name in pool["configs"] if (e := summary["configs"][name].get("episodes", {}).get(suite))]
@@ -574,8 +580,20 @@ def sensory_ablations(results: Results) -> list[tuple[str, str]]:
     return found
 
 
-def pertask_figure(results: Results, path: Path) -> bool:
-    """Per task: the intact model's success (gray) and each sensory ablation's paired change (colored)."""
+def paired_task_rates(summary: dict, config: str, reference: str, suite: str) -> dict[str, tuple[float, float]] | None:
+    """Per task, (reference's success, config's change) in % over the episodes both ran from the same starts
+    (`paired_episodes`); None when the two have no paired episodes in the suite."""
+    paired = summary["configs"].get(config, {}).get("episodes", {}).get(suite)
+    if not paired or paired["against"] != reference:
+        return None
+    return {task: (100.0 * t["against_successes"] / t["pairs"], 100.0 * (t["successes"] - t["against_successes"])
+                   / t["pairs"]) for task, t in paired["tasks"].items()}
+
+
+def pertask_figure(results: Results, summary: dict, path: Path) -> bool:
+    """Per task: the intact model's success (gray) and each sensory ablation's change (colored), on the episodes
+    both ran from the same starts where the episodes are recorded (an ablation may run fewer per task than the
+    intact model), else the difference of the seeds' per-task rates."""
     import matplotlib.pyplot as plt
 
     ablations = sensory_ablations(results)
@@ -592,7 +610,15 @@ def pertask_figure(results: Results, path: Path) -> bool:
         task_ids = sorted({t for seed in intact.values() for t in seed}, key=int)
         base = [np.mean([intact[s][t] for s in intact]) if intact else np.nan for t in task_ids]
         deltas = []
-        for name, _ in ablations:
+        same_episodes = False  # whether the gray bars are the intact model's success on the first ablation's pairs
+        for i, (name, _) in enumerate(ablations):
+            paired = paired_task_rates(summary, name, reference, suite)
+            if paired is not None:
+                deltas.append([paired[t][1] if t in paired else np.nan for t in task_ids])
+                if i == 0:
+                    base = [paired[t][0] if t in paired else np.nan for t in task_ids]
+                    same_episodes = True
+                continue
             runs = results.tasks.get(name, {}).get(suite, {})
             seeds = sorted(set(runs) & set(intact))
             deltas.append([np.mean([runs[s][t] - intact[s][t] for s in seeds]) if seeds else np.nan
@@ -600,7 +626,8 @@ def pertask_figure(results: Results, path: Path) -> bool:
         order = np.argsort(np.nan_to_num(deltas[0], nan=0.0))
         xs = np.arange(len(task_ids))
         width = 0.8 / (1 + len(ablations))
-        ax.bar(xs, np.asarray(base)[order], width, color="lightgray", label=f"{reference} (intact)")
+        intact_label = f"{reference} (intact{', same episodes' if same_episodes else ''})"
+        ax.bar(xs, np.asarray(base)[order], width, color="lightgray", label=intact_label)
         for i, ((name, channel), delta) in enumerate(zip(ablations, deltas, strict=True)):
             ax.bar(xs + (i + 1) * width, np.asarray(delta)[order], width, color=colors[i % 2],
                    label=f"{name}: change without {channel} error")
@@ -907,7 +934,7 @@ def write_report(runs_dir: Path, out: Path) -> dict:
     made = {
         "ladder": ladder_figure(summary, out / FIGURES["ladder"]),
         "params": params_figure(summary, out / FIGURES["params"]),
-        "pertask": pertask_figure(results, out / FIGURES["pertask"]),
+        "pertask": pertask_figure(results, summary, out / FIGURES["pertask"]),
         "corruption": corruption_figure(summary, out / FIGURES["corruption"]),
         "tasks": task_figure(results, out / FIGURES["tasks"]),
     }
