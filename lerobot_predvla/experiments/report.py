@@ -906,8 +906,12 @@ def lr_selection_section(runs_dir: Path) -> list[str]:
             return NOT_RUN
         return MISSING if sel["heldout_nll"][rate] is None else f"{sel['heldout_nll'][rate]:.3f}"
 
+    def pending(sel: dict) -> str:
+        done = len(sel["heldout_nll"])
+        return f"pending ({done} candidate{'s' * (done != 1)} done)"
+
     rows = [[sel["config"], SUITE_LABELS.get(sel["suite"], sel["suite"]), *[nll(sel, r) for r in rates],
-             f"{sel['chosen_lr']:g}" if "chosen_lr" in sel else f"pending ({len(sel['heldout_nll'])} candidates done)",
+             f"{sel['chosen_lr']:g}" if "chosen_lr" in sel else pending(sel),
              f"{sel['steps']:,}",
              str(sum(len(v) for v in sel["heldout_episodes"].values())) if "heldout_episodes" in sel else MISSING]
             for sel in selections]
