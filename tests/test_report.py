@@ -188,8 +188,9 @@ def test_compared_runs_are_paired_episode_by_episode(tmp_path):
     pairs = summary["configs"]["ol"]["episodes"]["libero_object"]
     # seed 0: ol 3 successes, er 6; only ol 0, only er 3 (two on task 0, one on task 1).
     # seed 1: ol 4, er 4; only ol 1 (task 1), only er 1 (task 0). Seed 2 started elsewhere and is left out.
-    assert pairs.pop("tasks") == {"0": {"pairs": 8, "successes": 4, "against_successes": 7},
-                                  "1": {"pairs": 8, "successes": 3, "against_successes": 3}}
+    assert pairs.pop("tasks") == {
+        "0": {"pairs": 8, "successes": 4, "against_successes": 7, "only": 0, "only_against": 3},
+        "1": {"pairs": 8, "successes": 3, "against_successes": 3, "only": 1, "only_against": 1}}
     assert pairs == {"against": "er", "seeds": [0, 1], "pairs": 16, "successes": 7, "against_successes": 10,
                      "only": 1, "only_against": 4, "sign_test_p": pytest.approx(2 * (1 + 5) / 32)}
     assert "episodes" not in summary["configs"]["er"]

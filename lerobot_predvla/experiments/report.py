@@ -20,6 +20,7 @@ get one row over the union of their seeds, and their paired episodes one sign te
 
 import json
 import sys
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -273,6 +274,14 @@ def sign_test(only_a: int, only_b: int) -> float:
     return 1.0 if n == 0 else float(binomtest(only_a, n, 0.5).pvalue)
 
 
+PAIR_COUNTS = ("pairs", "successes", "against_successes", "only", "only_against")  # of a set of episode pairs
+
+
+def sum_counts(parts: Iterable[dict[str, int]]) -> dict[str, int]:
+    """PAIR_COUNTS summed over several sets of episode pairs (tasks, or the configurations of a pool)."""
+    return {count: sum(part[count] for part in parts) for count in PAIR_COUNTS}
+
+
 def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
     """Add `episodes` (per suite: pairs, successes, discordant counts, sign test) to every `compare_to` entry."""
     by_run = {(r["config"], r["suite"], int(r["seed"])): r for r in records}
@@ -284,22 +293,16 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
             seeds = sorted(seed for (c, s, seed), r in by_run.items() if c == name and s == suite
                            and (against, suite, seed) in by_run
                            and same_starts(r, by_run[(against, suite, seed)]))
-            counts = {"pairs": 0, "successes": 0, "against_successes": 0, "only": 0, "only_against": 0}
-            tasks: dict[str, dict[str, int]] = {}  # the same counts per task: pairs, successes, against_successes
+            tasks: dict[str, dict[str, int]] = {}  # task -> PAIR_COUNTS over its paired episodes
             for seed in seeds:
                 mine, theirs = (run_episodes(runs_dir, c, suite, seed) for c in (name, against))
                 for key in mine.keys() & theirs.keys():
                     a, b = mine[key], theirs[key]
-                    counts["pairs"] += 1
-                    counts["successes"] += a
-                    counts["against_successes"] += b
-                    counts["only"] += a and not b
-                    counts["only_against"] += b and not a
-                    task = tasks.setdefault(key[0], {"pairs": 0, "successes": 0, "against_successes": 0})
-                    task["pairs"] += 1
-                    task["successes"] += a
-                    task["against_successes"] += b
-            if counts["pairs"]:
+                    task = tasks.setdefault(key[0], dict.fromkeys(PAIR_COUNTS, 0))
+                    for count, value in zip(PAIR_COUNTS, (1, a, b, a and not b, b and not a), strict=True):
+                        task[count] += value
+            if tasks:
+                counts = sum_counts(tasks.values())
                 entry.setdefault("episodes", {})[suite] = {
                     "against": against, "seeds": seeds, **counts,
                     "sign_test_p": sign_test(counts["only"], counts["only_against"]),
@@ -309,8 +312,7 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
             parts = [e for name in pool["configs"] if (e := summary["configs"][name].get("episodes", {}).get(suite))]
             if len(parts) < 2:  # one configuration's pairs are already in the table as they are
                 continue
-            counts = {k: sum(e[k] for e in parts) for k in ("pairs", "successes", "against_successes", "only",
-                                                              "only_against")}
+            counts = sum_counts(parts)
             pool.setdefault("episodes", {})[suite] = {
                 "against": " + ".join(e["against"] for e in parts),
                 "seeds": sorted(seed for e in parts for seed in e["seeds"]), **counts,
