@@ -386,7 +386,8 @@ def test_baselines_learning_rates_of_a_sweep_still_running(runs, tmp_path):
 
 def test_fresh_clone_section_names_what_is_read_and_what_is_redone(tmp_path, monkeypatch):
     """A training whose record names a model outside the runs dir's train/ is read from there; one whose checkpoint
-    lies in train/ is redone; data stages are recomputed, with their recorded time."""
+    lies in train/ is redone, unless it is a learning-rate candidate whose held-out result is committed; data stages
+    are recomputed, with their recorded time."""
     from lerobot_predvla.experiments.report import fresh_clone_section
     from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE
 
@@ -398,7 +399,18 @@ def test_fresh_clone_section_names_what_is_read_and_what_is_redone(tmp_path, mon
                              (1, "train/predvla/libero_object/seed1/checkpoints/030000/pretrained_model")):
         atomic_write_json(runs / "train" / "predvla" / "libero_object" / f"seed{seed}" / TRAIN_DONE_FILE,
                           {"checkpoint": checkpoint, "steps": 30000})
+    # A learning-rate candidate: its checkpoint is local, but its committed held-out result is all the sweep reads.
+    atomic_write_json(runs / "train" / "B1_lr0.0003" / "libero_object" / "seed0" / TRAIN_DONE_FILE,
+                      {"checkpoint": "train/B1_lr0.0003/libero_object/seed0/checkpoints/010000/pretrained_model",
+                       "steps": 10000})
+    atomic_write_json(runs / "lr_sweep" / "B1" / "libero_object" / "lr0.0003.json", {"lr": 0.0003})
+    atomic_write_json(runs / "train" / "B1_lr0.001" / "libero_object" / "seed0" / TRAIN_DONE_FILE,
+                      {"checkpoint": "train/B1_lr0.001/libero_object/seed0/checkpoints/010000/pretrained_model",
+                       "steps": 10000})
     text = "\n".join(fresh_clone_section(runs))
+    assert ("| training B1_lr0.0003 / libero_object / seed 0 | not needed: its held-out result is read from "
+            "`results/x/runs/lr_sweep/B1/libero_object/lr0.0003.json` |") in text
+    assert "| training B1_lr0.001 / libero_object / seed 0 | redone (10,000 steps)" in text
     assert "| data of libero_object (demos, convert) | recomputed from the sweep file (15 min as recorded)" in text
     assert "| training predvla / libero_object / seed 0 | read from `checkpoints/x/predvla_seed0` |" in text
     assert "| training predvla / libero_object / seed 1 | redone (30,000 steps)" in text

@@ -29,7 +29,12 @@ from scipy.stats import binomtest
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
 from lerobot_predvla.experiments.logs import TrainingRun, training_runs
-from lerobot_predvla.experiments.lr_selection import LR_SWEEP_DIR, pending_selections
+from lerobot_predvla.experiments.lr_selection import (
+    CANDIDATE_PREFIX,
+    LR_SWEEP_DIR,
+    candidate_name,
+    pending_selections,
+)
 from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE, eval_run_dir, run_log_path
 from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
@@ -805,8 +810,12 @@ def fresh_clone_section(runs_dir: Path) -> list[str]:
     """What a fresh clone of the repository recomputes and what it reads, stage by stage: the data stages (their
     outputs are never committed), and each finished training, whose model is read where its record names one outside
     the runs directory's `train/` (committed, e.g. by the sweep's `train.publish`) and is otherwise redone (its
-    checkpoints stay on the machine that trained it)."""
+    checkpoints stay on the machine that trained it), except a learning-rate candidate whose held-out result is
+    committed: the sweep reads that result and never needs the candidate's model again."""
     runs_dir = Path(runs_dir).resolve()
+    candidate_results = {
+        (candidate_name(path.parent.parent.name, json.loads(path.read_text())["lr"]), path.parent.name): path
+        for path in (runs_dir / LR_SWEEP_DIR).glob(f"*/*/{CANDIDATE_PREFIX}*.json")}
     rows = []
     for path in sorted((runs_dir / "data").glob("*.json")):
         stages = _load_json(path)
@@ -818,9 +827,14 @@ def fresh_clone_section(runs_dir: Path) -> list[str]:
         checkpoint = (runs_dir / trained["checkpoint"]).resolve()
         config, suite, seed = path.parts[-4], path.parts[-3], path.parts[-2].removeprefix("seed")
         local = checkpoint.is_relative_to(runs_dir / "train")
-        rows.append([f"training {config} / {suite} / seed {seed}",
-                     f"redone ({trained['steps']:,} steps): its checkpoint stays on the machine that trained it"
-                     if local else f"read from `{_relative([str(checkpoint)])}`"])
+        result = candidate_results.get((config, suite))
+        if result is not None:
+            done = f"not needed: its held-out result is read from `{_relative([str(result)])}`"
+        elif local:
+            done = f"redone ({trained['steps']:,} steps): its checkpoint stays on the machine that trained it"
+        else:
+            done = f"read from `{_relative([str(checkpoint)])}`"
+        rows.append([f"training {config} / {suite} / seed {seed}", done])
     if not rows:
         return []
     return ["", "## On a fresh clone", "",
