@@ -114,7 +114,8 @@ class ConfigSpec:
         eval_overrides: Policy fields at evaluation (`{"er_iterations": 0}`).
         eval_args: Extra raw `lerobot-eval` arguments.
         checkpoint_from: Evaluate this configuration's checkpoints instead of training (inference-time variants).
-        compare_to: Ablations: the intact configuration for paired differences; ladder: the preceding rung.
+        compare_to: Ablations: the intact configuration for paired differences; ladder: the preceding rung;
+            baselines: the model whose episodes theirs are paired with.
         branch: Ladder side branch (dashed in the figure, not part of the main chain).
         corruption: A corruption-curve point (Section 4.4): `{"channel": "vision" | "proprio", "alpha": 0.25}`, optional
             `source_suite` (whose dataset holds the unrelated episode; default: another suite, see
