@@ -91,6 +91,18 @@ def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
     assert "| 70.0 ± 10.0 (n = 3) | 76.0 (n = 1) | — | — |" in rows[0]  # (80 + 60 + 70) / 3; open loop seed 0
     assert "libero_object_cpu/report.md" in rows[1]
     assert update_docs(tmp_path, check=True) == []
+    # The sentence under the table counts the rows whose better BC baseline leads PredVLA: the CPU row's BC-RNN
+    # (85.5 against 72.0), then also Table 2's BC-Transformer once its record exists (98.0 against 70.0).
+    assert "the better BC baseline is ahead of it in 1 of the 1 rows where one was trained" in _block(
+        tmp_path / README)
+    atomic_write_json(table2 / "runs/records/B1/libero_object/seed0.json", _record("B1", 0, 490))
+    configs["B1"] = {"suites": {"libero_object": {"seeds": {"0": 98.0}}}}
+    atomic_write_json(table2 / "report.json", {"configs": configs, "pooled": {
+        "predvla_table2": {"configs": ["predvla_table2", "predvla_table2_seeds"]}}})
+    update_docs(tmp_path)
+    assert "| 70.0 ± 10.0 (n = 3) | 76.0 (n = 1) | — | 98.0 (n = 1) |" in _block(tmp_path / README)
+    assert "the better BC baseline is ahead of it in 2 of the 2 rows where one was trained" in _block(
+        tmp_path / README)
 
 
 def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys):

@@ -39,6 +39,7 @@ PAPER_OBJECT = {"error_regression": (89.24, 6.13, 14), "open_loop": (78.14, 4.53
                 "bc_rnn": (2.20, 2.27, None), "bc_transformer": (15.49, 12.15, None)}
 COLUMNS = (("error_regression", "PredVLA, error regression"), ("open_loop", "PredVLA, exact open loop"),
            ("bc_rnn", "BC-RNN"), ("bc_transformer", "BC-Transformer"))
+BASELINE_COLUMNS = ("bc_rnn", "bc_transformer")
 # PredVLA defaults that Table 2 does not give a value for (the open choices of docs/paper.md).
 UNSTATED_IN_TABLE2 = {"grad_clip_norm"}
 
@@ -282,20 +283,28 @@ def summary_table(rows: list[Row], prefix: str) -> str:
     return _table(["libero_object success (%), mean over training seeds", *[name for _, name in COLUMNS]], body)
 
 
+def best_baseline(row: Row) -> float | None:
+    """The better of the row's BC baselines (mean success), None when neither was trained."""
+    means = [row.cells[key].mean() for key in BASELINE_COLUMNS if row.cells[key].n]
+    return max(means) if means else None
+
+
 def plain_sentence(rows: list[Row]) -> str:
     """What the table shows, counted from the rows, beside the paper's claim."""
     compared = [r for r in rows if r.cells["open_loop"].n]
     ahead = sum(r.cells["error_regression"].mean() > r.cells["open_loop"].mean() for r in compared)
-    with_rnn = [r for r in rows if r.cells["bc_rnn"].n]
-    rnn_ahead = sum(r.cells["bc_rnn"].mean() > r.cells["error_regression"].mean() for r in with_rnn)
+    # The paper puts both BC baselines below PredVLA: a row contradicts it when the better of its baselines leads.
+    with_bc = [(r, best) for r in rows if (best := best_baseline(r)) is not None]
+    bc_ahead = sum(best > r.cells["error_regression"].mean() for r, best in with_bc)
     best = max(r.cells["error_regression"].mean() for r in rows)
     paper_er, paper_ol = PAPER_OBJECT["error_regression"][0], PAPER_OBJECT["open_loop"][0]
-    paper_bc = max(PAPER_OBJECT["bc_rnn"][0], PAPER_OBJECT["bc_transformer"][0])
-    agrees = ahead == len(compared) and rnn_ahead == 0
+    paper_bc = max(PAPER_OBJECT[key][0] for key in BASELINE_COLUMNS)
+    agrees = ahead == len(compared) and bc_ahead == 0
     return (f"The paper reports {paper_er}% on libero_object, error regression {paper_er - paper_ol:.2f} points ahead "
             f"of exact open loop and both BC baselines at or below {paper_bc}%. Here PredVLA with error regression "
             f"reaches at most {best:.1f}% (a row's mean), it is ahead of exact open loop in {ahead} of {len(compared)} "
-            f"rows, and BC-RNN is ahead of it in {rnn_ahead} of the {len(with_rnn)} rows where BC-RNN was trained: "
+            f"rows, and the better BC baseline is ahead of it in {bc_ahead} of the {len(with_bc)} rows where one was "
+            "trained: "
             + ("the ordering agrees with the paper's." if agrees else
                "these runs do not reproduce the paper's ordering.") + "\n")
 
