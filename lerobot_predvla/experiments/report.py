@@ -980,7 +980,9 @@ def write_report(runs_dir: Path, out: Path) -> dict:
         ("Ladder", ladder_table(summary), "ladder",
          "Δ: change in the 3-suite mean relative to the preceding rung (side branches: relative to their parent)."),
         ("Ablations", ablation_table(summary), "pertask",
-         "Δ: mean paired difference from the intact model over the seeds both have (n)."),
+         "Δ: success minus that of the run named (its `compare_to`, else the intact model), mean over the seeds "
+         "both have (n), each run's rate over its own episodes; where the two ran different numbers of episodes, "
+         "the paired episodes below compare only those both ran."),
         ("Paired episodes", episodes_table(summary), None,
          "Each episode against the same start of the compared run (same evaluation seed, resets and protocol); "
          "sign test: exact, two-sided, on the episodes that succeed in only one."),
