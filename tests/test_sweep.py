@@ -589,6 +589,53 @@ def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
     assert all("lerobot_predvla.cli.main" not in c for c in runner.execute.commands)
 
 
+def test_demonstrations_split_across_data_workers(tmp_path):
+    """`data.workers: 2` runs two `predvla demos` processes at once, each on every other missing task with its own
+    log; a failed share is reported and only its tasks run again; a bad value is refused."""
+    import threading
+
+    class TwoAtOnce(FakeData):
+        def __init__(self, fail: str | None = None):
+            super().__init__()
+            self.barrier, self.fail = threading.Barrier(2, timeout=10), fail
+
+        def __call__(self, command: list[str], log: Path) -> int:
+            if "demos" in command:
+                self.barrier.wait()  # raises unless both shares run at the same time
+                log.parent.mkdir(parents=True, exist_ok=True)
+                log.write_text("demos")
+                if command[command.index("--tasks") + 1] == self.fail:
+                    self.commands.append(command)
+                    return 1
+            return super().__call__(command, log)
+
+    data = {"libero_object": {"hdf5": "out/hdf5", "frontend": "out/frontend", "per_task": 3, "tasks": [0, 1, 2, 3],
+                              "vision_weights": "random", "workers": 2}}
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], data=data)
+    from lerobot_predvla.data.hdf5_layout import task_file
+    from lerobot_predvla.libero.env import task_spec
+
+    done_task = task_file(tmp_path / "out/hdf5", task_spec("libero_object", 1))
+    done_task.parent.mkdir(parents=True)
+    done_task.write_text("demos")
+    runner = Runner(Sweep.load(path), tmp_path / "runs", execute=TwoAtOnce(fail="2"))
+    assert [stage for stage, _ in runner.data_commands("libero_object")][:2] == ["demos.tasks0", "demos.tasks1"]
+    assert not runner.make_data("libero_object")  # the share of tasks 2 failed: no front end is fitted
+    shares = [c[c.index("--tasks") + 1] for c in runner.execute.commands]
+    assert sorted(shares) == ["0,3", "2"]
+    assert list(json.loads((tmp_path / "runs/data/libero_object.json").read_text())) == ["demos.tasks0"]
+    assert (tmp_path / "runs/logs/data/libero_object/seed0.demos.tasks1.log").is_file()
+    (stage, command), *_ = runner.data_commands("libero_object")  # one task left: one process, one log
+    assert stage == "demos" and command[command.index("--tasks") + 1] == "2"
+    runner.execute = FakeData()
+    assert runner.make_data("libero_object") and runner.data_commands("libero_object") == []
+    bad = yaml.safe_load(path.read_text())
+    bad["data"]["libero_object"]["workers"] = 0
+    path.write_text(yaml.safe_dump(bad))
+    with pytest.raises(SweepError, match="data.libero_object.workers must be >= 1"):
+        Sweep.load(path)
+
+
 def test_evaluation_parts_run_in_parallel_workers_with_their_own_logs(tmp_path):
     """`eval.workers: 2` runs two task parts at once (one lerobot-eval each, e.g. one per CPU core), each part
     logging to its own file; the record is the same as one worker's, and a bad value is refused."""

@@ -239,6 +239,9 @@ class DataSpec:
             substitute, printed as such).
         language_from: Instructions of the language PCA: 'libero' (all 40 of the task list, Section 4.1) or 'demos'.
         frame_stride: Fit the visual PCA on every n-th frame.
+        workers: `predvla demos` processes run at once (one per CPU core), each on every `workers`-th missing task
+            (logs `seed0.demos.tasks<k>.log`). The demonstrations are the same for any value: an episode's seed
+            depends only on `demo_seed`, its task and its attempt.
     """
 
     hdf5: str
@@ -253,6 +256,7 @@ class DataSpec:
     vision_weights: str = "imagenet"
     language_from: str = "libero"
     frame_stride: int = 4
+    workers: int = 1
 
 
 @dataclass(frozen=True)
@@ -333,6 +337,8 @@ class Sweep:
                                  f"got {spec.half_turn!r}.")
             if spec.hold_steps < 0:
                 raise SweepError(f"{path}: data.{suite}.hold_steps must be >= 0, got {spec.hold_steps}.")
+            if spec.workers < 1:
+                raise SweepError(f"{path}: data.{suite}.workers must be >= 1, got {spec.workers}.")
         sweep = cls(settings, {}, path.parent)
         for spec in configs:
             if spec.name in sweep.configs:
@@ -651,12 +657,13 @@ class Runner:
         hdf5, frontend = self._path(spec.hdf5), self._path(spec.frontend)
         commands = []
         missing = self.missing_demo_tasks(suite, spec, hdf5)
-        if missing:
-            commands.append(("demos", [*predvla, "demos", "--suite", suite, "--tasks", ",".join(map(str, missing)),
-                                       "--per-task", str(spec.per_task), "--render-interval", str(spec.render_interval),
-                                       "--seed", str(spec.demo_seed), "--init-noise", str(spec.init_noise),
-                                       "--half-turn", spec.half_turn, "--hold-steps", str(spec.hold_steps),
-                                       "--out", str(hdf5)]))
+        shares = [missing[k::spec.workers] for k in range(min(spec.workers, len(missing)))]
+        for k, share in enumerate(shares):
+            commands.append(("demos" if len(shares) == 1 else f"demos.tasks{k}", [
+                *predvla, "demos", "--suite", suite, "--tasks", ",".join(map(str, share)),
+                "--per-task", str(spec.per_task), "--render-interval", str(spec.render_interval),
+                "--seed", str(spec.demo_seed), "--init-noise", str(spec.init_noise),
+                "--half-turn", spec.half_turn, "--hold-steps", str(spec.hold_steps), "--out", str(hdf5)]))
         if not (frontend / "metadata.json").is_file():
             commands.append(("frontend", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", suite,
                                           "--vision-weights", spec.vision_weights, "--language-from",
@@ -676,19 +683,33 @@ class Runner:
         return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]
 
     def make_data(self, suite: str) -> bool:
-        """Run the missing data stages of `suite`, recording each one's command and wall time in
-        `RUNS_DIR/data/<suite>.json`; False when one failed."""
+        """Run the missing data stages of `suite` (the `demos.tasks<k>` shares of `data.workers` at once),
+        recording each one's command and wall time in `RUNS_DIR/data/<suite>.json`; False when one failed."""
+        from concurrent.futures import ThreadPoolExecutor
+        from itertools import groupby
+
         stages_file = self.runs_dir / "data" / f"{suite}.json"
-        for stage, command in self.data_commands(suite):
+
+        def run_stage(stage: str, command: list[str]) -> tuple[str, list[str], int, float]:
             start = time.monotonic()
             code = self.execute(command, self.log_path("data", suite, 0, stage))
-            if code != 0:
-                print(f"predvla sweep: data stage {stage} of {suite} failed (exit {code}); see "
-                      f"{self.log_path('data', suite, 0, stage)}", file=sys.stderr)
-                return False
+            return stage, command, code, time.monotonic() - start
+
+        for _, group in groupby(self.data_commands(suite), key=lambda item: item[0].split(".")[0]):
+            group = list(group)
+            with ThreadPoolExecutor(max_workers=len(group)) as pool:
+                finished = list(pool.map(lambda item: run_stage(*item), group))
             stages = json.loads(stages_file.read_text()) if stages_file.is_file() else {}
-            stages[stage] = {"command": command, "wall_s": round(time.monotonic() - start, 1)}
+            for stage, command, code, wall in finished:
+                if code == 0:
+                    stages[stage] = {"command": command, "wall_s": round(wall, 1)}
             atomic_write_json(stages_file, stages)
+            for stage, _, code, _ in finished:
+                if code != 0:
+                    print(f"predvla sweep: data stage {stage} of {suite} failed (exit {code}); see "
+                          f"{self.log_path('data', suite, 0, stage)}", file=sys.stderr)
+            if any(code != 0 for _, _, code, _ in finished):
+                return False
         return True
 
     # ----- running ----------------------------------------------------------------------------------------
