@@ -704,11 +704,11 @@ class Runner:
                 if code == 0:
                     stages[stage] = {"command": command, "wall_s": round(wall, 1)}
             atomic_write_json(stages_file, stages)
-            for stage, _, code, _ in finished:
-                if code != 0:
-                    print(f"predvla sweep: data stage {stage} of {suite} failed (exit {code}); see "
-                          f"{self.log_path('data', suite, 0, stage)}", file=sys.stderr)
-            if any(code != 0 for _, _, code, _ in finished):
+            failed = [(stage, code) for stage, _, code, _ in finished if code != 0]
+            for stage, code in failed:
+                print(f"predvla sweep: data stage {stage} of {suite} failed (exit {code}); see "
+                      f"{self.log_path('data', suite, 0, stage)}", file=sys.stderr)
+            if failed:
                 return False
         return True
 
