@@ -5,6 +5,7 @@ import argparse
 import faulthandler
 import json
 import os
+import shutil
 import time
 from datetime import timedelta
 from pathlib import Path
@@ -731,6 +732,29 @@ def test_keep_every_prunes_a_finished_trainings_checkpoints(tmp_path):
 
     with pytest.raises(SweepError, match="train.keep_every must be a positive multiple of train.save_freq"):
         Sweep.load(sweep_file(tmp_path, train={"device": "cpu", "save_freq": 2, "keep_every": 3}))
+
+
+def test_a_finished_trainings_lost_checkpoint_is_named_instead_of_evaluated(tmp_path, capsys):
+    """A RUNS_DIR copied without a checkpoint its training record names: the sweep says which file names it and
+    starts no evaluation of it (neither run nor dry run); the other units go on."""
+    path = sweep_file(tmp_path, seeds=[0, 1], suites=["libero_object"])
+    runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FakeLeRobot())
+    assert len(runner.run(configs=["predvla"], progress=False)["done"]) == 2
+    out = runner.train_dir("predvla", "libero_object", 1)
+    shutil.rmtree(out / "checkpoints")
+    capsys.readouterr()
+
+    planned = runner.pending_commands(["A6"], (0, 1))
+    assert [arg(c, "seed") for c in planned] == ["0"]  # seed 0's evaluation only
+    message = capsys.readouterr().err
+    assert str(out / TRAIN_DONE_FILE) in message and "has no model.safetensors" in message
+
+    fake = FakeLeRobot()
+    runner.execute = fake
+    outcome = runner.run(configs=["A6"], progress=False)
+    assert outcome["done"] == ["A6/libero_object/seed0"] and outcome["failed"] == ["A6/libero_object/seed1"]
+    assert fake.count("lerobot-eval") == 1 and fake.count("lerobot-train") == 0
+    assert f"remove {out / TRAIN_DONE_FILE} to train it again" in capsys.readouterr().err
 
 
 def test_machine_names_the_processor_its_cores_and_bf16(tmp_path):
