@@ -29,6 +29,7 @@ from lerobot_predvla.experiments.sweep import (
     parse_shard,
     subprocess_executor,
 )
+from lerobot_predvla.utils.manifest import sha256_file
 from lerobot_predvla.utils.versions import machine
 
 
@@ -755,6 +756,29 @@ def test_a_finished_trainings_lost_checkpoint_is_named_instead_of_evaluated(tmp_
     assert outcome["done"] == ["A6/libero_object/seed0"] and outcome["failed"] == ["A6/libero_object/seed1"]
     assert fake.count("lerobot-eval") == 1 and fake.count("lerobot-train") == 0
     assert f"remove {out / TRAIN_DONE_FILE} to train it again" in capsys.readouterr().err
+
+
+def test_runs_of_one_checkpoint_path_pair_only_when_they_evaluated_the_same_weights(tmp_path):
+    """A training redone in place (its checkpoint lost) puts new weights under the old path: an evaluation of the
+    new model is not paired with one of the old, and the report says so."""
+    path = sweep_file(tmp_path, seeds=[0, 1], suites=["libero_object"])
+    runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FakeLeRobot())
+    assert len(runner.run(configs=["predvla", "A6"], progress=False)["done"]) == 4
+    checkpoint = runner.trained_checkpoint(
+        json.loads((runner.train_dir("predvla", "libero_object", 1) / TRAIN_DONE_FILE).read_text()))
+    a6 = json.loads(runner.record_path(Run("A6", "libero_object", 1)).read_text())
+    assert a6["model_sha256"] == sha256_file(checkpoint / "model.safetensors")
+    assert write_report(tmp_path / "runs", tmp_path / "report")["configs"]["A6"]["episodes"]["libero_object"][
+        "seeds"] == [0, 1]
+
+    save_file({"w": torch.ones(3, 4), "b": torch.zeros(5)}, str(checkpoint / "model.safetensors"))  # retrained
+    runner.record_path(Run("A6", "libero_object", 1)).unlink()
+    shutil.rmtree(runner.eval_dir(Run("A6", "libero_object", 1)))
+    assert runner.run(configs=["A6"], progress=False)["done"] == ["A6/libero_object/seed1"]
+    summary = write_report(tmp_path / "runs", tmp_path / "report")
+    assert summary["configs"]["A6"]["episodes"]["libero_object"]["seeds"] == [0]
+    assert summary["unpaired"] == [{"config": "A6", "against": "predvla", "suite": "libero_object", "seed": 1}]
+    assert "Not paired: `A6` against `predvla`, object, seed 1" in (tmp_path / "report" / "report.md").read_text()
 
 
 def test_machine_names_the_processor_its_cores_and_bf16(tmp_path):

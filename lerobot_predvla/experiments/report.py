@@ -12,7 +12,8 @@ means of the suite means and need every suite. Paired differences use the seeds 
 A configuration with `compare_to` (e.g. exact open loop against error regression) is also compared episode by
 episode, from the runs' `eval_info.json` files: both runs of a seed start from the same init states when they share
 the evaluation seed, reset mode and protocol, so each episode is a pair. The report counts the pairs that succeed
-in only one of the two and gives the exact two-sided sign test on them.
+in only one of the two and gives the exact two-sided sign test on them. Two runs that load one checkpoint path
+pair only when they evaluated the same weights (`same_model`).
 
 Configurations that name another in `pool_with` (further training seeds of the same model and evaluation) also
 get one row over the union of their seeds, and their paired episodes one sign test over all the seeds' pairs.
@@ -261,6 +262,14 @@ def same_starts(a: dict, b: dict) -> bool:
         a.get("init_states") is not False or a.get("n_episodes_per_task") == b.get("n_episodes_per_task"))
 
 
+def same_model(a: dict, b: dict) -> bool:
+    """Whether two runs that load one checkpoint path evaluated the same weights: a training redone in place (its
+    checkpoint lost) writes new weights under the old path. Runs of different checkpoints (a baseline against
+    PredVLA) compare different models on purpose; records written before `model_sha256` existed pair only with
+    each other."""
+    return a.get("checkpoint") != b.get("checkpoint") or a.get("model_sha256") == b.get("model_sha256")
+
+
 def run_episodes(runs_dir: Path, config: str, suite: str, seed: int) -> dict[tuple[str, int], bool]:
     """Success of every evaluated episode of a run by (task id, episode index), from its eval_info.json files."""
     episodes = {}
@@ -295,9 +304,14 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
         if not against:
             continue
         for suite in summary["suites"]:
-            seeds = sorted(seed for (c, s, seed), r in by_run.items() if c == name and s == suite
-                           and (against, suite, seed) in by_run
-                           and same_starts(r, by_run[(against, suite, seed)]))
+            comparable = sorted(seed for (c, s, seed), r in by_run.items() if c == name and s == suite
+                                and (against, suite, seed) in by_run
+                                and same_starts(r, by_run[(against, suite, seed)]))
+            seeds = [seed for seed in comparable
+                     if same_model(by_run[(name, suite, seed)], by_run[(against, suite, seed)])]
+            summary.setdefault("unpaired", []).extend(
+                {"config": name, "against": against, "suite": suite, "seed": seed}
+                for seed in comparable if seed not in seeds)
             tasks: dict[str, dict[str, int]] = {}  # task -> PAIR_COUNTS over its paired episodes
             for seed in seeds:
                 mine, theirs = (run_episodes(runs_dir, c, suite, seed) for c in (name, against))
@@ -333,10 +347,15 @@ def episodes_table(summary: dict) -> str | None:
              f"{e['only']} / {e['only_against']}", f"{e['sign_test_p']:.3g}"]
             for name, entry in entries for suite in summary["suites"]
             if (e := entry.get("episodes", {}).get(suite))]
-    if not rows:
+    notes = [f"Not paired: `{u['config']}` against `{u['against']}`, {SUITE_LABELS[u['suite']]}, seed {u['seed']}: "
+             "both load one checkpoint path, but not the same weights (`model_sha256` of their records differs; a "
+             "training redone in place). Evaluate both from the new checkpoint to pair them."
+             for u in summary.get("unpaired", [])]
+    if not rows and not notes:
         return None
-    return _table(["Model", "against", "suite", "seeds", "episode pairs", "successes (model / against)",
-                   "only model / only against", "sign test p"], rows)
+    table = [_table(["Model", "against", "suite", "seeds", "episode pairs", "successes (model / against)",
+                     "only model / only against", "sign test p"], rows)] if rows else []
+    return "\n\n".join(table + notes)
 
 
 # ----- tables --------------------------------------------------------------------------------------------

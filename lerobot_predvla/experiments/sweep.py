@@ -45,6 +45,7 @@ from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RU
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
 from lerobot_predvla.utils.checkpoints import last_pretrained, prune_checkpoints
 from lerobot_predvla.utils.io import atomic_write_json
+from lerobot_predvla.utils.manifest import sha256_file
 from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.versions import machine, package_versions
 
@@ -1092,6 +1093,8 @@ class Runner:
             "eval_wall_s": round(wall, 1),  # summed over the parts: with several workers, more than the elapsed time
             "eval_workers": workers,
             "checkpoint": trained["checkpoint"],
+            # the weights evaluated: a training redone in place leaves the path, not this (report.same_model)
+            "model_sha256": sha256_file(self.trained_checkpoint(trained) / "model.safetensors"),
             "commands": {"train": trained["command"], "eval": command},
             "versions": versions(),
             "finished": datetime.now(UTC).isoformat(timespec="seconds"),
