@@ -769,10 +769,8 @@ class Runner:
                 commands += [command for _, command in self.data_commands(suite)]
                 data_done.add(suite)
             if (out / TRAIN_DONE_FILE).is_file():
-                try:
-                    checkpoint = self.evaluable_checkpoint(json.loads((out / TRAIN_DONE_FILE).read_text()), out)
-                except SweepError as err:
-                    print(f"predvla sweep: {err}", file=sys.stderr)
+                checkpoint = self.evaluable_checkpoint(json.loads((out / TRAIN_DONE_FILE).read_text()), out)
+                if checkpoint is None:
                     continue
             else:
                 if (trained, suite) not in selected:  # one selection serves every seed
@@ -822,12 +820,9 @@ class Runner:
                 continue
             trained_spec = self.sweep.configs[trained]
             train_result = self.train(trained_spec, suite, seed)
-            if train_result is not None:
-                try:
-                    self.evaluable_checkpoint(train_result, self.train_dir(trained, suite, seed))
-                except SweepError as err:
-                    print(f"predvla sweep: {err}", file=sys.stderr)
-                    train_result = None
+            if train_result is not None and self.evaluable_checkpoint(
+                    train_result, self.train_dir(trained, suite, seed)) is None:
+                train_result = None
             for run in pending:
                 bar.set_postfix_str(run.key)
                 ok = train_result is not None and self.evaluate(run, train_result)
@@ -841,17 +836,18 @@ class Runner:
         directory moved to another machine, or pointed at a committed checkpoint, still finds it."""
         return (self.runs_dir / trained["checkpoint"]).resolve()
 
-    def evaluable_checkpoint(self, trained: dict, out: Path) -> Path:
-        """The checkpoint a finished training (`out`'s `TRAIN_DONE_FILE`) names, checked before its evaluations:
-        one left out of a copied or cloned RUNS_DIR must not turn into an evaluation error per task."""
+    def evaluable_checkpoint(self, trained: dict, out: Path) -> Path | None:
+        """The checkpoint a finished training (`out`'s `TRAIN_DONE_FILE`) names, checked before its evaluations;
+        None, with what to do on stderr, when it is gone: one left out of a copied or cloned RUNS_DIR must not turn
+        into an evaluation error per task."""
         checkpoint = self.trained_checkpoint(trained)
-        if not (checkpoint / "model.safetensors").is_file():
-            done = out / TRAIN_DONE_FILE
-            raise SweepError(
-                f"{done} names the checkpoint {checkpoint}, which has no model.safetensors. Restore that checkpoint, "
-                f"or remove {done} to train it again: evaluations already recorded from the lost model keep their "
-                f"records (move those aside to evaluate the new model in their place)")
-        return checkpoint
+        if (checkpoint / "model.safetensors").is_file():
+            return checkpoint
+        done = out / TRAIN_DONE_FILE
+        print(f"predvla sweep: {done} names the checkpoint {checkpoint}, which has no model.safetensors. Restore "
+              f"that checkpoint, or remove {done} to train it again: evaluations already recorded from the lost "
+              "model keep their records (move those aside to evaluate the new model in their place)", file=sys.stderr)
+        return None
 
     def train(self, spec: ConfigSpec, suite: str, seed: int, publish: bool = True) -> dict | None:
         """Train (or resume, or reuse) one checkpoint; None when lerobot-train (or its `train.publish`) failed.
