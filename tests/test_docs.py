@@ -121,7 +121,9 @@ def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys
 
 
 # ----- shared configs do not pin the training machine's device ---------------------------------------------
-SHIPPED = sorted(p.parent.name for p in (REPO / "checkpoints").glob("*/config.json"))
+# `checkpoints/<name>/` and the models sweeps publish (`checkpoints/<sweep>/<config>_seed<seed>/`)
+SHIPPED = sorted(p.parent.relative_to(REPO / "checkpoints").as_posix()
+                 for p in (REPO / "checkpoints").rglob("config.json") if (p.parent / "train_config.json").is_file())
 
 
 @pytest.fixture
