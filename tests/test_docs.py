@@ -19,7 +19,7 @@ from lerobot_predvla.experiments.headline import (
     RESULTS_DOC,
     update_docs,
 )
-from lerobot_predvla.hub.publish import without_machine_paths
+from lerobot_predvla.hub.publish import shipped_checkpoints, without_machine_paths
 from lerobot_predvla.utils.io import atomic_write_json
 
 REPO = Path(__file__).resolve().parents[1]
@@ -121,9 +121,7 @@ def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys
 
 
 # ----- shared configs do not pin the training machine's device ---------------------------------------------
-# `checkpoints/<name>/` and the models sweeps publish (`checkpoints/<sweep>/<config>_seed<seed>/`)
-SHIPPED = sorted(p.parent.relative_to(REPO / "checkpoints").as_posix()
-                 for p in (REPO / "checkpoints").rglob("config.json") if (p.parent / "train_config.json").is_file())
+SHIPPED = [path.relative_to(REPO / "checkpoints").as_posix() for path in shipped_checkpoints(REPO)]
 
 
 @pytest.fixture
@@ -191,12 +189,18 @@ def test_push_clears_the_training_device(tmp_path):
         {"artefact": None}, {"device": "cpu", "float_dtype": None}]  # LeRobot's loaders replace the device step's
 
 
-def test_report_docs_rewrites_a_checkpoint_that_pins_the_device_and_keeps_its_manifest(tmp_path):
+def test_shipped_checkpoints_include_the_models_sweeps_publish():
+    assert {"predvla_libero_object", "libero_object_table2/predvla_table2_seed1"} <= set(SHIPPED)
+    assert all((REPO / "checkpoints" / name / "model.safetensors").is_file() for name in SHIPPED)
+
+
+@pytest.mark.parametrize("where", ["shipped", "sweep/predvla_seed0"])  # checkpoints/<name>/, a sweep's train.publish
+def test_report_docs_rewrites_a_checkpoint_that_pins_the_device_and_keeps_its_manifest(tmp_path, where):
     from lerobot_predvla.experiments.headline import stale_checkpoint_files
     from lerobot_predvla.utils.io import atomic_write_bytes
     from lerobot_predvla.utils.manifest import verify_manifests, write_manifest
 
-    checkpoint = tmp_path / "checkpoints/shipped"
+    checkpoint = tmp_path / "checkpoints" / where
     shutil.copytree(REPO / "checkpoints/predvla_libero_object", checkpoint)
     train = checkpoint / "train_config.json"
     train.write_text(train.read_text().replace('"device": null', '"device": "cpu"'))
@@ -276,7 +280,7 @@ def test_bracket_arguments_are_quoted():
 def test_shipped_configs_and_model_cards_are_as_published():
     from lerobot_predvla.experiments.headline import stale_checkpoint_files
 
-    assert stale_checkpoint_files(REPO) == {}, "run `predvla report --docs` and commit checkpoints/*/"
+    assert stale_checkpoint_files(REPO) == {}, "run `predvla report --docs` and commit checkpoints/"
 
 
 def test_model_card_states_the_checkpoints_own_training_and_results():

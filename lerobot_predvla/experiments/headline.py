@@ -10,9 +10,9 @@ Table 2 defaults) and from the run records (episodes per task, step cap, seeds).
 are left out, so a new experiment leads the table once its `report.json` is committed.
 
 `predvla report --docs` rewrites the block between HEADLINE_START and HEADLINE_END in README.md (the summary table)
-and docs/results.md (the summary table and a per-seed table), and the configs and model card of every checkpoint
-under checkpoints/ as every publishing route writes them (`lerobot_predvla.hub.publish.repository_files`); `--check`
-fails when any differs.
+and docs/results.md (the summary table and a per-seed table), and the configs and model card of every shipped
+checkpoint (`lerobot_predvla.hub.publish.shipped_checkpoints`: `checkpoints/<name>/` and the models sweeps publish) as
+every publishing route writes them (`lerobot_predvla.hub.publish.repository_files`); `--check` fails when any differs.
 """
 
 import json
@@ -348,16 +348,16 @@ def replace_block(text: str, block: str, path: Path) -> str:
 
 
 def stale_checkpoint_files(root: Path) -> dict[Path, bytes]:
-    """The files of each checkpoint under `root/checkpoints/` that differ from what every publishing route writes
-    (`lerobot_predvla.hub.publish.repository_files`: configs that do not pin the training machine, the model card
-    rendered from the checkpoint's config, training record and evaluations), with their new content; and the
-    checkpoint's SHA-256 manifest where it has one, recomputed over its files with those contents."""
-    from lerobot_predvla.hub.publish import repository_files
+    """The files of each shipped checkpoint (`lerobot_predvla.hub.publish.shipped_checkpoints`) that differ from what
+    every publishing route writes (`lerobot_predvla.hub.publish.repository_files`: configs that do not pin the
+    training machine, the model card rendered from the checkpoint's config, training record and evaluations), with
+    their new content; and the checkpoint's SHA-256 manifest where it has one, recomputed over its files with those
+    contents."""
+    from lerobot_predvla.hub.publish import repository_files, shipped_checkpoints
     from lerobot_predvla.utils.manifest import MANIFEST_FILE, listed_files, manifest_text
 
     stale = {}
-    for config in sorted((Path(root) / "checkpoints").glob("*/config.json")):
-        checkpoint = config.parent
+    for checkpoint in shipped_checkpoints(root):
         changed = {rel: data for rel, data in repository_files(checkpoint, root).items()
                    if not (checkpoint / rel).is_file() or (checkpoint / rel).read_bytes() != data}
         manifest = checkpoint / MANIFEST_FILE

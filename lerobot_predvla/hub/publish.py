@@ -532,6 +532,13 @@ def render_card(
 
 
 # ----- upload ----------------------------------------------------------------------------------------------
+def shipped_checkpoints(root: Path) -> list[Path]:
+    """The checkpoint directories committed under `root/checkpoints/`: every folder holding a policy `config.json`,
+    both `checkpoints/<name>/` and the models sweeps publish (`train.publish`, e.g.
+    `checkpoints/<sweep>/<config>_seed<seed>/`)."""
+    return sorted(config.parent for config in (Path(root) / "checkpoints").rglob("config.json"))
+
+
 def repository_files(checkpoint: Path, root: Path) -> dict[str, bytes]:
     """The configs and model card of a checkpoint directory committed in this repository (`root`), as every publishing
     route writes them: configs without the training machine's paths and device (`without_machine_paths`), the card
