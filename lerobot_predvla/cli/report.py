@@ -22,7 +22,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, help="Report directory (report.md, report.json, PNGs).")
     parser.add_argument("--docs", action="store_true",
                         help=f"Rewrite the headline block of {README} and {RESULTS_DOC} from results/*/report.json "
-                             "and the configs and model cards of checkpoints/*/ (no RUNS_DIR).")
+                             "and the configs and model cards of every checkpoint under checkpoints/ (no RUNS_DIR).")
     parser.add_argument("--check", action="store_true",
                         help="With --docs: change nothing; exit 1 when a headline block or checkpoint file differs.")
     parser.add_argument("--root", type=Path, default=Path("."),
