@@ -531,7 +531,7 @@ def render_card(
     return card
 
 
-# ----- upload ----------------------------------------------------------------------------------------------
+# ----- checkpoints committed in this repository ----------------------------------------------------------
 def shipped_checkpoints(root: Path) -> list[Path]:
     """The checkpoint directories committed under `root/checkpoints/`: every folder holding a policy `config.json`,
     both `checkpoints/<name>/` and the models sweeps publish (`train.publish`, e.g.
@@ -551,6 +551,7 @@ def repository_files(checkpoint: Path, root: Path) -> dict[str, bytes]:
     return {**{rel: src for rel, src in files.items() if isinstance(src, bytes)}, CARD_FILE: card.encode()}
 
 
+# ----- upload ----------------------------------------------------------------------------------------------
 def upload_files(
     files: dict[str, Path | bytes], repo_id: str, private: bool | None, commit_message: str, token: str | None = None
 ) -> str:
