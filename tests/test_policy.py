@@ -11,6 +11,7 @@ from safetensors import safe_open
 
 from lerobot_predvla import PredVLAConfig, PredVLAPolicy
 from lerobot_predvla.policies.predvla.configuration_predvla import LONG_HORIZON_TAU
+from lerobot_predvla.policies.predvla.modeling_predvla import term_weights, training_terms
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 
 
@@ -177,6 +178,34 @@ def test_free_energy_gradient_matches_finite_differences():
             torch.testing.assert_close((grad * v).sum(), numeric, rtol=1e-6, atol=1e-8)
 
 
+def test_plain_gradient_descent_takes_section_3_5s_step():
+    """`er_optimizer="gd"`: one iteration is c_q - eta dE/dc_q, with dE/dc_q the free energy's full gradient."""
+    policy = randomised_policy(er_iterations=1, er_window=4, er_optimizer="gd", er_lr=0.01).double()
+    er = policy.error_regression
+    for obs in stream(6):
+        feed(er, {k: v.double() for k, v in obs.items()})
+    c_q = torch.stack(er.posteriors).clone().requires_grad_(True)
+    (grad,) = torch.autograd.grad(er.free_energy(policy.model.rollout(er.start_state, er.lang_term, c_q), c_q), c_q)
+    er.infer()
+    torch.testing.assert_close(torch.stack(er.posteriors), (c_q - 0.01 * grad).detach())
+
+
+@pytest.mark.parametrize("detach", [False, True])
+def test_detached_priors_make_the_complexity_pull_the_posteriors_only(detach):
+    """With the prediction errors weighted 0, dE/dc_q is w_ER (c_q - c_p) exactly when the priors are detached;
+    through the priors, the later steps' priors pull back on the earlier posteriors and it differs."""
+    policy = randomised_policy(er_iterations=1, er_window=4, er_detach_priors=detach, er_lambda_v=0.0,
+                               er_lambda_q=0.0).double()
+    er = policy.error_regression
+    for obs in stream(6):
+        feed(er, {k: v.double() for k, v in obs.items()})
+    c_q = (torch.stack(er.posteriors) + 0.1).requires_grad_(True)
+    traj = policy.model.rollout(er.start_state, er.lang_term, c_q)
+    (grad,) = torch.autograd.grad(er.free_energy(traj, c_q), c_q)
+    own = policy.config.er_complexity_weight * (c_q - policy.model.priors(traj)).detach()
+    assert torch.allclose(grad, own) == detach
+
+
 def test_error_regression_lowers_window_free_energy():
     """Every control step's inference ends below where it started.
 
@@ -241,6 +270,36 @@ def test_padded_and_non_refresh_steps_contribute_nothing(trained_policy):
     assert not torch.equal(loss_and_grads()[0], reference[0])
     policy.sequences = saved
     policy.posterior_store.discard_pending()  # gradients for inspection only: not a training step
+    policy.eval()
+
+
+def test_training_skips_the_padding_after_the_longest_episode(trained_policy):
+    """The batch is cut after its longest episode (`trim_padding`): the loss, the network's gradient and the
+    posteriors' gradient equal those of the recurrence run over the whole padded sequence."""
+    policy, episodes = trained_policy.train(), torch.tensor([0, 3, 6])
+    cfg, model = policy.config, policy.model
+    assert int(policy.sequences.length[episodes].max()) < cfg.sequence_length  # there is padding to skip
+
+    def loss_and_grads(trim: bool):
+        policy.zero_grad()
+        if trim:
+            loss, _ = policy.forward({"episode_index": episodes})
+        else:
+            seq = policy.sequences.batch(episodes, torch.device("cpu"))
+            c_q = policy.posterior_store.gather(episodes)
+            terms = training_terms(model, cfg, seq, c_q, model.language_term(seq["language"]))
+            loss = sum(w * terms[name] for name, w in term_weights(cfg).items())
+        loss.backward()
+        rows = policy.posterior_store.pending_gradients()[-1][1]
+        policy.posterior_store.discard_pending()  # gradients for inspection only: not a training step
+        return loss.detach(), [p.grad.clone() for p in policy.parameters()], rows.grad.clone()
+
+    full, trimmed = loss_and_grads(trim=False), loss_and_grads(trim=True)
+    torch.testing.assert_close(trimmed[0], full[0], rtol=1e-6, atol=1e-7)
+    for a, b in zip(trimmed[1], full[1], strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7)
+    torch.testing.assert_close(trimmed[2], full[2], rtol=1e-5, atol=1e-7)
+    assert bool(full[2][:, -1].abs().sum() == 0)  # the padded posteriors get no gradient either way
     policy.eval()
 
 

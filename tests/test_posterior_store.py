@@ -136,3 +136,23 @@ def test_the_bench_training_step_with_a_store_trains_the_batch_rows_only():
     losses = [step() for _ in range(3)]
     assert all(torch.isfinite(torch.tensor(losses)))
     assert s.steps.sum() <= 6 and (s.latents.abs().sum((1, 2)) > 0).sum() == (s.steps > 0).sum() > 0
+
+
+def test_dense_store_is_torch_adam_on_the_whole_store():
+    """`dense=True` (`--policy.posterior_adam=dense`) on partial batches: torch.optim.Adam on one tensor, whose
+    absent rows see a zero gradient (their moments decay and stale momentum keeps moving them)."""
+    s = PosteriorStore(EPISODES, LENGTH, DIM, lr=LR, dense=True)
+    with torch.no_grad():
+        s.latents.copy_(store().latents)
+    dense = torch.nn.Parameter(s.latents.clone())
+    adam = torch.optim.Adam([dense], lr=LR)
+    batches = [[0, 2], [2, 3], [3, 0, 2], [2]]
+    for seed, episodes in enumerate(batches):
+        train_step(s, episodes, seed)
+        adam.zero_grad()
+        index = torch.tensor(episodes)
+        ((dense[index] - target(seed)[index]) ** 2).sum().mul(0.5).backward()
+        adam.step()
+    torch.testing.assert_close(s.latents, dense.detach())
+    torch.testing.assert_close(s.exp_avg, adam.state[dense]["exp_avg"])
+    assert not torch.equal(s.latents[3], store().latents[3])  # row 3 moved on in batch 4, where it was absent

@@ -462,6 +462,25 @@ def test_the_libero_object_cpu_sweep_file_is_valid(tmp_path):
     assert fresh.checkpoint_from == "predvla_cpu_8k" and not fresh.init_states and fresh.eval_seed == 1000
 
 
+def test_the_reading_screen_changes_one_reading_per_configuration(tmp_path):
+    """configs/sweeps/libero_object_reading.yaml (docs/research/dynamics.md): each training reading reaches
+    lerobot-train as the config field it names, a dict-typed field whole as JSON (draccus parses no other form)."""
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "libero_object_reading.yaml")
+    runner = Runner(sweep, tmp_path)
+    train = {name: runner.train_command(sweep.configs[name], "libero_object", 0)
+             for name in ("table2", "mean", "scaled", "dense", "open_loop_term")}
+    assert all("--steps=10000" in c and "--batch_size=32" in c for c in train.values())
+    assert "--policy.complexity_reduction=mean" in train["mean"]
+    assert "--policy.posterior_adam=dense" in train["dense"]
+    assert "--policy.open_loop_weight=1.0" in train["open_loop_term"]
+    mapping = [a for a in train["scaled"] if a.startswith("--policy.normalization_mapping=")]
+    assert len(mapping) == 1 and json.loads(mapping[0].split("=", 1)[1])["STATE"] == "MEAN_STD"
+    readings = {"--policy.type=predvla", "--policy.push_to_hub=false", "--policy.device=cpu"}
+    assert {a for a in train["table2"] if a.startswith("--policy.")} == readings  # the defaults: Table 2
+    assert sweep.configs["scaled_gd"].eval_overrides == {"er_optimizer": "gd"}
+    assert sweep.settings.eval_tasks == [1, 4, 7] and sweep.settings.n_episodes == 10
+
+
 def test_the_init_noise_sweep_records_demonstrations_that_start_like_the_official_init_states(tmp_path):
     """The arm's initial joint noise, the half-turn rule and the holds after success reach `predvla demos`;
     libero_object_cpu.yaml keeps the fixed start."""

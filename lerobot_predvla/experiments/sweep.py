@@ -65,6 +65,9 @@ EVAL_WALL_FILE = "predvla_sweep_eval.json"  # wall time of one evaluation part, 
 Executor = Callable[[list[str], Path], int]  # (command, log file) -> exit code
 
 
+MAPPING_FIELDS = ("normalization_mapping",)  # config fields of type dict, set whole on the command line
+
+
 class SweepError(ValueError):
     """A malformed sweep file or an impossible request."""
 
@@ -85,10 +88,13 @@ def _recipe(fields: dict) -> dict:
 
 
 def _as_args(values: dict, prefix: str) -> list[str]:
-    """{"tau": [30, 14, 8, 2], "x": {"y": 1}} -> ["--policy.tau=[30,14,8,2]", "--policy.x.y=1"]."""
+    """{"tau": [30, 14, 8, 2], "x": {"y": 1}} -> ["--policy.tau=[30,14,8,2]", "--policy.x.y=1"]; a dict-typed field
+    (MAPPING_FIELDS, e.g. `normalization_mapping`) is passed whole as JSON, the only form draccus parses for it."""
     args = []
     for key, value in values.items():
-        if isinstance(value, dict):
+        if key in MAPPING_FIELDS:
+            args.append(f"--{prefix}.{key}={json.dumps(value)}")
+        elif isinstance(value, dict):
             args += _as_args(value, f"{prefix}.{key}")
         elif isinstance(value, bool):
             args.append(f"--{prefix}.{key}={str(value).lower()}")

@@ -16,6 +16,8 @@ CORRUPTION_CHANNELS = ("vision", "proprio")
 RECURRENCE_BACKENDS = ("auto", "python", "cpp")
 COMPLEXITY_REDUCTIONS = ("sum", "mean")  # training C of Eq. 10: summed over the sequence, or its mean
 ER_ADAM_STATES = ("fresh", "carried")  # error regression's Adam: afresh per control step, or per posterior
+ER_OPTIMIZERS = ("adam", "gd")  # error regression's update: Table 2's Adam, or Section 3.5's c_q -= eta dE/dc_q
+POSTERIOR_ADAMS = ("row", "dense")  # training posteriors' Adam: per demonstration in the batch, or the whole store
 # Table 2 enables gradient clipping without a value; this one binds only on spikes (see `grad_clip_norm`).
 GRAD_CLIP_NORM = 100.0
 PREDVLA_PAPER_PARAMETERS = 675_732  # Table 1, at the paper's LIBERO layout (2 cameras, proprio 9, action 7)
@@ -66,6 +68,12 @@ class PredVLAConfig(CachedFeaturesConfig):
             "bfloat16", a third less memory for large datasets (LIBERO-90, 4,500 demonstrations x 500 steps:
             4.6 GB instead of 6.9 GB; docs/speed.md). The update is computed in float32 and the posteriors stay
             float32; the moments are rounded to ~3 significant digits when stored.
+        posterior_adam: How the training posteriors' Adam steps. "row" (default): each demonstration's posteriors
+            are stepped only when it is in the batch, with its own step count (`posterior_store.py`). "dense": one
+            Adam over the whole store, as `torch.optim.Adam` on a single tensor would do: rows absent from the
+            batch see a zero gradient, so their moments decay while stale momentum keeps moving them. Section 3.4
+            makes the posteriors "model parameters" without saying which; dense costs one pass over the store
+            per step.
         lr_decay_to: None (default): constant learning rates (Table 2). A value: the network learning rate decays
             along a cosine from `optimizer_lr` to this value over the run (`--steps`, at most `train_steps`;
             LeRobot's `cosine_decay_with_warmup`, no warm-up); `posterior_lr` stays constant. An option for
@@ -116,6 +124,13 @@ class PredVLAConfig(CachedFeaturesConfig):
             optimised in ("carried"; the newest starts from zero). Table 2 names Adam but not which; fresh kicks
             every posterior of the window by about `er_lr` at each control step's first iteration, carried only
             the newest (docs/paper.md, "Choices the paper leaves open").
+        er_optimizer: Error regression's update of the window's posteriors. "adam" (default, Table 2) or "gd": the
+            plain gradient step c_q <- c_q - eta dE/dc_q that Section 3.5 writes, with `er_lr` as eta (no moments;
+            `er_adam_state` is then unused).
+        er_detach_priors: False (default): dE/dc_q is the full derivative, including how each posterior moves the
+            later steps' priors c_p (Eqs. 1-2) through the regenerated states. True: the priors enter the
+            complexity term as constants (their values at the current iterate), so the complexity pulls each
+            posterior toward its prior and never drags the priors along. Section 3.5 does not say which.
         er_complexity_weight: w_ER, the complexity weight of every module during error regression
             (Table 2: 1.0).
         er_lambda_v: Visual prediction-error weight during error regression (1; 0 is ablation A4).
@@ -162,6 +177,7 @@ class PredVLAConfig(CachedFeaturesConfig):
     grad_clip_norm: float = GRAD_CLIP_NORM
     posterior_lr: float = 1e-2
     posterior_moments_dtype: str = "float32"
+    posterior_adam: str = "row"
     lr_decay_to: float | None = None
     lambda_v: float = 1.0
     lambda_q: float = 1.0
@@ -176,6 +192,8 @@ class PredVLAConfig(CachedFeaturesConfig):
     er_deadline_ms: float | None = None
     er_lr: float = 0.05
     er_adam_state: str = "fresh"
+    er_optimizer: str = "adam"
+    er_detach_priors: bool = False
     er_complexity_weight: float = 1.0
     er_lambda_v: float = 1.0
     er_lambda_q: float = 1.0
@@ -215,6 +233,10 @@ class PredVLAConfig(CachedFeaturesConfig):
             )
         if self.er_adam_state not in ER_ADAM_STATES:
             raise ValueError(f"`er_adam_state` must be one of {ER_ADAM_STATES}, got {self.er_adam_state!r}.")
+        if self.er_optimizer not in ER_OPTIMIZERS:
+            raise ValueError(f"`er_optimizer` must be one of {ER_OPTIMIZERS}, got {self.er_optimizer!r}.")
+        if self.posterior_adam not in POSTERIOR_ADAMS:
+            raise ValueError(f"`posterior_adam` must be one of {POSTERIOR_ADAMS}, got {self.posterior_adam!r}.")
         if self.er_deadline_ms is not None and self.er_deadline_ms <= 0:
             raise ValueError(f"`er_deadline_ms` must be > 0 milliseconds (or None), got {self.er_deadline_ms}.")
         if self.er_corruption_channel not in (None, *CORRUPTION_CHANNELS):

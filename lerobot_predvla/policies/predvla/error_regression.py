@@ -2,7 +2,8 @@
 
 At each control step: append the observation, initialise the newest posteriors from their priors
 (Eqs. 1-2), run `er_iterations` Adam steps on the window's posteriors against the free energy (Eq. 9)
-(Adam afresh at every control step, or continuing each posterior's moments: `er_adam_state`) with the network
+(Adam afresh at every control step, or continuing each posterior's moments: `er_adam_state`; or Section 3.5's
+plain gradient step: `er_optimizer="gd"`) with the network
 frozen, regenerating the states from the window start after each update, and decode the action from A_bottom.
 With zero iterations no observation is ever read: exact open loop.
 
@@ -113,6 +114,8 @@ class ErrorRegression:
         self.model = model
         self.config = model.config
         self.rollout = model.rollout if rollout is None else rollout
+        # Adam's moments persist across control steps (`er_adam_state="carried"`; plain descent has none).
+        self.carries_moments = self.config.er_adam_state == "carried" and self.config.er_optimizer == "adam"
         self.reset()
 
     def reset(self) -> None:
@@ -140,7 +143,10 @@ class ErrorRegression:
         cfg = self.config
         eps_v, eps_q = self.model.prediction_errors(traj, torch.stack(self.vision), torch.stack(self.proprio))
         w_v, w_q = torch.stack(self.vision_weight), torch.stack(self.proprio_weight)
-        complexity = self.model.complexity(c_q, self.model.priors(traj), (cfg.er_complexity_weight,) * 4)
+        priors = self.model.priors(traj)
+        if cfg.er_detach_priors:  # the priors as constants of this iterate: C pulls c_q only (`er_detach_priors`)
+            priors = priors.detach()
+        complexity = self.model.complexity(c_q, priors, (cfg.er_complexity_weight,) * 4)
         return (cfg.er_lambda_v * eps_v * w_v + cfg.er_lambda_q * eps_q * w_q + complexity).sum()
 
     def __call__(
@@ -188,7 +194,7 @@ class ErrorRegression:
         vision_ok = ones if vision_available is None else vision_available
         proprio_ok = ones if proprio_available is None else proprio_available
         self.posteriors.append(prior)
-        if cfg.er_adam_state == "carried":
+        if self.carries_moments:
             self.adam_exp_avg.append(torch.zeros_like(prior))
             self.adam_exp_avg_sq.append(torch.zeros_like(prior))
             self.adam_steps.append(0)
@@ -216,7 +222,7 @@ class ErrorRegression:
         `er_deadline_ms`, only those that fit in the budget from `started` (default: now), at least one."""
         before = torch.stack(self.posteriors)
         c_q = before.clone().requires_grad_(True)
-        carried = self.config.er_adam_state == "carried"
+        plain, carried = self.config.er_optimizer == "gd", self.carries_moments
         adam = WindowAdam(c_q, self.config.er_lr, **({
             "exp_avg": torch.stack(self.adam_exp_avg), "exp_avg_sq": torch.stack(self.adam_exp_avg_sq),
             "rows_steps": torch.tensor(self.adam_steps)} if carried else {}))
@@ -227,7 +233,11 @@ class ErrorRegression:
             for done in range(1, self.config.er_iterations + 1):
                 traj = self.rollout(self.start_state, self.lang_term, c_q)
                 (grad,) = torch.autograd.grad(self.free_energy(traj, c_q), c_q)
-                adam.step(grad)
+                if plain:  # Section 3.5 as written: c_q <- c_q - eta dE/dc_q
+                    with torch.no_grad():
+                        c_q.sub_(grad, alpha=self.config.er_lr)
+                else:
+                    adam.step(grad)
                 now = time.perf_counter()
                 if budget is not None and (now - started + (now - begin) / done) * 1e3 > budget:
                     break  # the next iteration would likely end past the budget

@@ -64,6 +64,17 @@ def training_terms(model: PredictiveModel, cfg: PredVLAConfig, seq: dict[str, Te
     }
 
 
+def trim_padding(seq: dict[str, Tensor], c_q: Tensor) -> tuple[dict[str, Tensor], Tensor]:
+    """The batch cut after its longest episode's last valid step. Every term of Eq. 10 is masked there and a
+    posterior only reaches later steps, so the losses and every gradient are those of the padded batch, without
+    running the recurrence over steps that no episode of the batch has."""
+    valid = seq["valid"]
+    length = int(valid.any(dim=1).nonzero().max()) + 1 if bool(valid.any()) else valid.shape[0]
+    if length == valid.shape[0]:
+        return seq, c_q
+    return {k: v if k == "language" else v[:length] for k, v in seq.items()}, c_q[:length]
+
+
 def term_weights(cfg: PredVLAConfig) -> dict[str, float]:
     """The weights of Eq. 10's terms: lambda_v, lambda_q, lambda_a and 1 for C (its w_l are inside it)."""
     return {"vision_error": cfg.lambda_v, "proprio_error": cfg.lambda_q, "action_nll": cfg.lambda_a,
@@ -99,6 +110,7 @@ class PredVLAPolicy(PreTrainedPolicy):
             self.posterior_store = PosteriorStore(
                 self.sequences.vision.shape[0], config.sequence_length, self.model.posterior_dim,
                 lr=config.posterior_lr, betas=adam.betas, eps=adam.eps, moments_dtype=config.posterior_moments_dtype,
+                dense=config.posterior_adam == "dense",
             )
             # DDP must neither broadcast the store nor all-reduce it: `PosteriorStore.step` exchanges the batch's
             # rows only (torch.nn.parallel.DistributedDataParallel reads this attribute of the wrapped module).
@@ -215,6 +227,7 @@ class PredVLAPolicy(PreTrainedPolicy):
         episode_index = batch["episode_index"].reshape(-1)
         seq = self.sequences.batch(episode_index, self.posterior_store.latents.device)
         c_q = self.posterior_store.gather(episode_index.to(self.posterior_store.latents.device))
+        seq, c_q = trim_padding(seq, c_q)
         model = self.model
         lang_term = model.language_term(seq["language"])
         terms = training_terms(model, cfg, seq, c_q, lang_term)

@@ -17,6 +17,8 @@ Per row this is exactly `torch.optim.Adam` run on that demonstration's posterior
 batches it was in. Dense Adam over the whole store differs only in what it does to absent rows: it decays
 their moments and keeps moving them on stale momentum, which no demonstration's objective asks for. On a batch
 holding every demonstration the two are identical (tested). A step costs O(batch), whatever the dataset's size.
+Dense Adam is available as a reading of the paper (`dense=True`, `--policy.posterior_adam=dense`); it costs one
+pass over the whole store per step.
 
 Posteriors, moments and step counts are saved together in `posterior_store.safetensors` (training
 checkpoints only; never `model.safetensors` or the Hub), so `--resume` continues exactly.
@@ -48,10 +50,13 @@ class PosteriorStore(nn.Module):
         moments_dtype: Storage of the Adam moments: "float32", or "bfloat16" to save a third of the memory of
             large datasets (`PredVLAConfig.posterior_moments_dtype`). The posteriors themselves stay float32:
             a step of `lr` is below bfloat16's resolution for posteriors of order 1.
+        dense: False (default): row-wise Adam, above. True: one Adam over the whole store, every row stepped at
+            every `step` with a zero gradient where it was not in the batch (`PredVLAConfig.posterior_adam`).
     """
 
     def __init__(self, num_episodes: int, sequence_length: int, posterior_dim: int, lr: float,
-                 betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8, moments_dtype: str = "float32"):
+                 betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8, moments_dtype: str = "float32",
+                 dense: bool = False):
         super().__init__()
         if moments_dtype not in MOMENT_DTYPES:
             raise ValueError(f"posterior moments dtype must be one of {list(MOMENT_DTYPES)}, got {moments_dtype!r}.")
@@ -61,7 +66,7 @@ class PosteriorStore(nn.Module):
         for name in ("exp_avg", "exp_avg_sq"):
             self.register_buffer(name, torch.zeros(shape, dtype=MOMENT_DTYPES[moments_dtype]), persistent=False)
         self.register_buffer("steps", torch.zeros(num_episodes, dtype=torch.long), persistent=False)
-        self.lr, self.betas, self.eps = lr, betas, eps
+        self.lr, self.betas, self.eps, self.dense = lr, betas, eps, dense
         self._pending: list[tuple[Tensor, Tensor]] = []
 
     @property
@@ -113,7 +118,10 @@ class PosteriorStore(nn.Module):
             return 0
         if index.numel() == 0:
             return 0
-        rows, inverse = torch.unique(index, return_inverse=True)
+        if self.dense:  # every row, with a zero gradient where it was not in the batch
+            rows, inverse = torch.arange(self.num_episodes, device=index.device), index
+        else:
+            rows, inverse = torch.unique(index, return_inverse=True)
         g = grad.new_zeros(len(rows), *grad.shape[1:]).index_add_(0, inverse, grad)  # duplicates sum
         beta1, beta2 = self.betas
         self.steps[rows] += 1

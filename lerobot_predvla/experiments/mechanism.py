@@ -1,0 +1,180 @@
+"""A task only observations can solve: reach one of K targets whose identity is seen, never told.
+
+Every episode has the same instruction. The target is drawn from K places on a circle; the visual features carry a
+fixed code of the target at every step, and proprioception is the point's position. Exact open loop never reads an
+observation (Section 3.5), so one instruction gives one trajectory: it can reach at most one of the K targets, a
+success rate of at most 1/K by construction. Error regression reads the code through the visual prediction error
+(Eqs. 7-9) and can steer the actions to the right target only if training made the posteriors that explain the
+visual features also drive the action branch: the mechanism the paper claims.
+
+`train_policy` trains the real `PredVLAPolicy` (its `forward`, posterior store and `update`) on demonstrations of a
+proportional expert, and `success_rate` acts with its `select_action`, the same error regression `lerobot-eval`
+runs. A small network and short episodes make a training take seconds on one core (`tests/test_mechanism.py`,
+`predvla mechanism`).
+"""
+
+import math
+from dataclasses import dataclass, field
+
+import torch
+from lerobot.utils.constants import OBS_STATE
+from torch import Tensor
+
+from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
+from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
+from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
+
+
+@dataclass(frozen=True)
+class ReachTask:
+    """K targets on a circle around the start; a point moved by velocity actions in [-1, 1].
+
+    Args:
+        num_targets: K; open loop succeeds in at most 1/K of the episodes.
+        length: Control steps per episode (the expert arrives in about half of them and then holds still).
+        wait_steps: Steps at the start in which the expert holds still while the code is already visible: the
+            time error regression has to read it before the first move (a LIBERO policy sees its scene before
+            its arm reaches anything; without a wait the demonstrations' first action already needs the target).
+        dt: Position change per unit action and step.
+        gain: The expert's proportional gain, action = clip(gain (target - position), -1, 1).
+        code_dim: Size of the visual features, a fixed random code per target (unit variance).
+        start_noise: Standard deviation of the start position around the centre.
+        success_radius: An episode succeeds if it ends within this distance of its target.
+        seed: Seed of the codes.
+    """
+
+    num_targets: int = 4
+    length: int = 24
+    wait_steps: int = 6
+    dt: float = 0.15
+    gain: float = 2.0
+    code_dim: int = 8
+    start_noise: float = 0.05
+    success_radius: float = 0.3
+    seed: int = 0
+
+    @property
+    def targets(self) -> Tensor:
+        angles = torch.arange(self.num_targets, dtype=torch.float32) * (2 * math.pi / self.num_targets) + math.pi / 4
+        return torch.stack([angles.cos(), angles.sin()], dim=-1)
+
+    @property
+    def codes(self) -> Tensor:
+        return torch.randn(self.num_targets, self.code_dim, generator=torch.Generator().manual_seed(self.seed))
+
+    def starts(self, targets: Tensor, generator: torch.Generator) -> Tensor:
+        return self.start_noise * torch.randn(len(targets), 2, generator=generator)
+
+    def expert_action(self, position: Tensor, target: Tensor) -> Tensor:
+        return (self.gain * (target - position)).clamp(-1.0, 1.0)
+
+    def move(self, position: Tensor, action: Tensor) -> Tensor:
+        return position + self.dt * action.clamp(-1.0, 1.0)
+
+    def demonstrations(self, per_target: int, seed: int) -> tuple[EpisodeSequences, Tensor]:
+        """`per_target` expert episodes per target as the in-memory table `PredVLAPolicy` trains on, and each
+        episode's target index."""
+        generator = torch.Generator().manual_seed(seed)
+        which = torch.arange(self.num_targets).repeat_interleave(per_target)
+        goal = self.targets[which]
+        position = self.starts(which, generator)
+        states, actions = [], []
+        for t in range(self.length):
+            action = self.expert_action(position, goal) if t >= self.wait_steps else torch.zeros_like(position)
+            states.append(position)
+            actions.append(action)
+            position = self.move(position, action)
+        n = len(which)
+        sequences = EpisodeSequences(
+            vision=self.codes[which][:, None].expand(n, self.length, self.code_dim).clone(),
+            state=torch.stack(states, dim=1),
+            action=torch.stack(actions, dim=1),
+            language=torch.zeros(n, 1),
+            length=torch.full((n,), self.length),
+        )
+        return sequences, which
+
+
+def task_config(task: ReachTask, **overrides) -> PredVLAConfig:
+    """A small PredVLA for `task`: the paper's structure, time constants and inference settings at a width that
+    trains in seconds. Overrides are `PredVLAConfig` fields (the readings being compared)."""
+    fields = {
+        "vision_dim_per_camera": task.code_dim, "num_cameras": 1, "proprio_dim": 2, "action_dim": 2,
+        "language_dim": 1, "module_dims": (16, 32, 32, 32), "latent_dim": 8, "bottleneck_dim": 8,
+        "head_hidden_dim": 32, "num_mixtures": 2, "visual_refresh_interval": 1, "sequence_length": task.length,
+        "er_window": task.length, "optimizer_lr": 3e-3, "recurrence_backend": "python", "device": "cpu",
+        "push_to_hub": False,
+    }
+    fields.update(overrides)
+    return PredVLAConfig(**fields)
+
+
+@dataclass
+class TrainingRecord:
+    losses: list[float] = field(default_factory=list)
+
+
+def train_policy(task: ReachTask, config: PredVLAConfig, steps: int, per_target: int = 16, seed: int = 0
+                 ) -> tuple[PredVLAPolicy, TrainingRecord]:
+    """Train `PredVLAPolicy` as `lerobot-train` does (its `forward`, Adam on the network with the config's
+    preset and gradient clip, then `update` for the posteriors), on full batches of the task's demonstrations."""
+    torch.manual_seed(seed)
+    policy = PredVLAPolicy(config)
+    sequences, _ = task.demonstrations(per_target, seed)
+    policy.sequences = sequences
+    preset = config.get_optimizer_preset()
+    policy.posterior_store = PosteriorStore(
+        len(sequences.length), config.sequence_length, policy.model.posterior_dim, lr=config.posterior_lr,
+        betas=preset.betas, eps=preset.eps, dense=config.posterior_adam == "dense",
+    )
+    optimizer = torch.optim.Adam(policy.network_parameters(), lr=preset.lr, betas=preset.betas, eps=preset.eps,
+                                 weight_decay=preset.weight_decay)
+    batch = {"episode_index": torch.arange(len(sequences.length))}
+    record = TrainingRecord()
+    policy.train()
+    for _ in range(steps):
+        loss, _ = policy.forward(batch)
+        optimizer.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(policy.network_parameters(), preset.grad_clip_norm)
+        optimizer.step()
+        policy.update()
+        record.losses.append(loss.item())
+    policy.eval()
+    return policy, record
+
+
+@torch.no_grad()
+def rollout(task: ReachTask, policy: PredVLAPolicy, episodes_per_target: int, seed: int,
+            **overrides) -> tuple[Tensor, Tensor]:
+    """Act in the task with `select_action` for a batch of episodes (every target equally often), with the
+    config fields in `overrides` (e.g. `er_iterations=0`, exact open loop) set for the rollout only. Returns the
+    final positions and each episode's target index."""
+    saved = {k: getattr(policy.config, k) for k in overrides}
+    for k, v in overrides.items():
+        setattr(policy.config, k, v)
+    try:
+        generator = torch.Generator().manual_seed(seed)
+        which = torch.arange(task.num_targets).repeat(episodes_per_target)
+        position = task.starts(which, generator)
+        code = task.codes[which]
+        policy.reset()
+        for _ in range(task.length):
+            action = policy.select_action({
+                OBS_VISION_FEATURES: code, OBS_STATE: position, OBS_LANGUAGE_FEATURES: torch.zeros(len(which), 1),
+            })
+            position = task.move(position, action)
+        return position, which
+    finally:
+        for k, v in saved.items():
+            setattr(policy.config, k, v)
+        policy.reset()
+
+
+def success_rate(task: ReachTask, policy: PredVLAPolicy, episodes_per_target: int = 10, seed: int = 1000,
+                 **overrides) -> float:
+    """Fraction of episodes that end within `success_radius` of their own target."""
+    position, which = rollout(task, policy, episodes_per_target, seed, **overrides)
+    return float(((position - task.targets[which]).norm(dim=-1) < task.success_radius).float().mean())
