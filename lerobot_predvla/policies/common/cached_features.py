@@ -8,6 +8,7 @@ actions with the same Gaussian-mixture head and train on whole episodes held in 
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+import torch
 from lerobot.configs import PreTrainedConfig
 from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
 from lerobot.optim.optimizers import AdamConfig
@@ -32,6 +33,17 @@ def cached_feature_normalization() -> dict[str, NormalizationMode]:
         "ENV": NormalizationMode.IDENTITY,
         "ACTION": NormalizationMode.MIN_MAX,
     }
+
+
+def best_device() -> str:
+    """The device LeRobot picks when none is set: CUDA, then MPS, then XPU, then the CPU."""
+    if torch.cuda.is_available():
+        return "cuda"
+    if torch.backends.mps.is_available():
+        return "mps"
+    if hasattr(torch, "xpu") and torch.xpu.is_available():
+        return "xpu"
+    return "cpu"
 
 
 def use_dataset_frontend(config: "CachedFeaturesConfig", dataset_root: Path) -> None:
@@ -108,6 +120,8 @@ class CachedFeaturesConfig(PreTrainedConfig):
     normalization_mapping: dict[str, NormalizationMode] = field(default_factory=cached_feature_normalization)
 
     def __post_init__(self) -> None:
+        if not self.device:  # unset (every shipped config): LeRobot's choice, without its warning about "None"
+            self.device = best_device()
         super().__post_init__()
         if self.visual_refresh_interval < 1:
             raise ValueError(f"`visual_refresh_interval` must be >= 1, got {self.visual_refresh_interval}.")
