@@ -5,10 +5,10 @@ PredVLA (`predvla`, `predvla_ladder`) and the observation-driven baselines (`pre
 actions with the same Gaussian-mixture head and train on whole episodes held in memory.
 """
 
+import logging
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-import torch
 from lerobot.configs import PreTrainedConfig
 from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
 from lerobot.optim.optimizers import AdamConfig
@@ -36,14 +36,16 @@ def cached_feature_normalization() -> dict[str, NormalizationMode]:
 
 
 def best_device() -> str:
-    """The device LeRobot picks when none is set: CUDA, then MPS, then XPU, then the CPU."""
-    if torch.cuda.is_available():
-        return "cuda"
-    if torch.backends.mps.is_available():
-        return "mps"
-    if hasattr(torch, "xpu") and torch.xpu.is_available():
-        return "xpu"
-    return "cpu"
+    """The device LeRobot picks when none is set (its `auto_select_torch_device`: CUDA, MPS, XPU, else the CPU), without
+    the log lines it writes about that choice."""
+    from lerobot.configs import policies
+
+    previous = logging.root.manager.disable
+    logging.disable(logging.WARNING)
+    try:
+        return policies.auto_select_torch_device().type
+    finally:
+        logging.disable(previous)
 
 
 def use_dataset_frontend(config: "CachedFeaturesConfig", dataset_root: Path) -> None:
