@@ -48,7 +48,7 @@ demo: install libero
 synthetic-demo: install
 	$(VENV)/bin/predvla synthetic-demo
 
-# LIBERO simulator (issue 4): hf-libero via LeRobot's extra, assets from PyPI (no Hub), Debian GL
+# LIBERO simulator: hf-libero via LeRobot's extra, assets from PyPI (no Hub), Debian GL
 # libraries, LIBERO's config.yaml in .venv/libero_config and ~/.libero. Idempotent: ~2 s when done.
 libero: install
 	$(PY) -m lerobot_predvla.libero.install

@@ -302,6 +302,28 @@ def test_model_card_states_the_checkpoints_own_training_and_results():
     assert "No evaluation results" not in card
 
 
+def test_model_card_command_reproduces_its_results_and_limitations_state_them():
+    """The card's `lerobot-eval` command runs the protocol of the results it shows (episodes per task, step cap), and
+    its limitations give error regression against exact open loop and the BC baselines on the same data."""
+    from lerobot_predvla.hub.publish import evaluation_records
+
+    checkpoint = REPO / "checkpoints/predvla_libero_object"
+    card = (checkpoint / "README.md").read_text()
+    records = {r["config"]: r for r in evaluation_records(checkpoint, REPO / "results")}
+    shown, open_loop = records["predvla_cpu_8k"], records["predvla_cpu_8k_open_loop"]
+    command = card[card.index("lerobot-eval --policy.path"):].splitlines()[0]
+    protocol = f"--env.episode_length={shown['episode_length']} --eval.n_episodes={shown['n_episodes_per_task']} "
+    assert protocol in command
+    limitations = card[card.index("## Limitations"):card.index("## Citation")]
+    assert (f"Error regression succeeds in {shown['successes']}/{shown['episodes']}" in limitations
+            and f"exact open loop (`--policy.er_iterations=0`: {open_loop['successes']}/{open_loop['episodes']}"
+            in limitations)
+    runs = REPO / "results/libero_object_cpu/runs/records"
+    baselines = [json.loads(p.read_text()) for p in runs.glob("B*/*/*.json")]
+    assert baselines and all(f"{b['successes']}/{b['episodes']}" in limitations for b in baselines)
+    assert "compare across seeds" not in limitations and "one training seed (0)" in limitations
+
+
 def test_push_attaches_the_recorded_evaluations_of_a_shipped_checkpoint(tmp_path):
     """`predvla push --results results` renders the same results as the committed card (one renderer)."""
     card = tmp_path / "card.md"

@@ -246,3 +246,20 @@ def test_card_names_an_inference_override_that_config_json_predates():
         "er_adam_state": "carried"}
     assert inference_settings({**record, "eval_overrides": {"er_adam_state": "fresh"}}, config) == {}
     assert inference_settings({**record, "eval_overrides": {"er_iterations": 0}}, config) == {"er_iterations": 0}
+
+
+def test_acting_from_python_runs_as_written_without_a_device_warning():
+    """docs/hub.md's "Acting from Python" example, as written, in a fresh interpreter from the repository root: raw
+    frames and the task through the saved processors and `select_action`, a (1, 7) action per step; loading the
+    shipped checkpoint (device unset) does not warn about a device."""
+    root = Path(__file__).resolve().parents[1]
+    page = (root / "docs" / "hub.md").read_text()
+    section = page[page.index("## Acting from Python"):]
+    start = section.index("```python\n") + len("```python\n")
+    example = section[start:section.index("\n```", start)]
+    result = subprocess.run([sys.executable, "-c", example], cwd=root, capture_output=True, text=True, timeout=600,
+                            env={**os.environ, "HF_HUB_OFFLINE": "1"})
+    assert result.returncode == 0, result.stderr[-3000:]
+    printed = [line for line in result.stdout.splitlines() if "torch.Size" in line]
+    assert printed == [f"{step} torch.Size([1, 7])" for step in range(3)], result.stdout
+    assert "is not available" not in result.stderr, result.stderr[-3000:]

@@ -75,7 +75,8 @@ def test_a_folder_without_manifest_loads_with_one_log_line(tmp_path, caplog):
     with caplog.at_level(logging.INFO):
         assert not verify_manifests(directory, other)
     assert [r.getMessage() for r in caplog.records if MANIFEST_FILE in r.getMessage()] == [
-        f"No {MANIFEST_FILE} in {directory}, {other} (an older checkpoint or another tool's): files not verified."
+        f"No {MANIFEST_FILE} in {directory}, {other} (a checkpoint saved without one, or another tool's): "
+        "files not verified."
     ]
 
 

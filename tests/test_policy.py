@@ -415,3 +415,38 @@ def test_open_loop_term_trains_the_prior_chain_on_the_same_episodes(trained_poli
         policy.eval()
     with pytest.raises(ValueError, match="open_loop_weight"):
         PredVLAConfig(open_loop_weight=-1.0)
+
+
+@pytest.mark.parametrize("omp", [None, "2"])
+def test_acting_on_the_cpu_runs_on_one_thread_unless_omp_num_threads_is_set(monkeypatch, omp):
+    """select_action runs error regression on one torch thread on the CPU (small matmuls stall on shared cores with
+    more) and gives torch its setting back; OMP_NUM_THREADS, where set, keeps torch's own count."""
+    if omp is None:
+        monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    else:
+        monkeypatch.setenv("OMP_NUM_THREADS", omp)
+    policy = randomised_policy()
+    policy.reset()
+    seen = []
+
+    class Spy:
+        def __init__(self, inner):
+            self.inner = inner
+
+        def __call__(self, *args):
+            seen.append(torch.get_num_threads())
+            return self.inner(*args)
+
+        def __getattr__(self, name):
+            return getattr(self.inner, name)
+
+    policy.error_regression = Spy(policy.error_regression)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        with torch.inference_mode():
+            policy.select_action(stream(1)[0])
+        assert seen == [1 if omp is None else 2]
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(threads)

@@ -130,6 +130,30 @@ def test_lerobot_rollout_drives_the_replay_robot(so101, tmp_path):
 
 
 @pytest.mark.slow  # trains with lerobot-train, runs lerobot-rollout
+def test_robot_dry_run_runs_as_written(tmp_path):
+    """docs/robot.md's first commands, as written, in an empty folder (nothing of the repository's but the plugin):
+    `predvla robot-example` makes the recording and checkpoint, `lerobot-rollout` plays two episodes on the replay
+    robot; the compiled loops are ready before the first tick, and the action log tells the policy's actions from
+    LeRobot's own moves between episodes."""
+    page = (Path(__file__).resolve().parents[1] / "docs" / "robot.md").read_text()
+    start = page.index("```bash\n") + len("```bash\n")
+    script = page[start:page.index("\n```", start)]
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
+    result = subprocess.run(["bash", "-e", "-c", script], cwd=tmp_path, capture_output=True, text=True, env=env,
+                            timeout=900)
+    log = result.stdout + result.stderr
+    assert result.returncode == 0 and "Rollout finished" in log, log[-3000:]
+    assert log.index("PredVLA: C++ recurrence ready") < log.index("Recording episode 0"), log[-3000:]
+    dataset = LeRobotDataset("local/rollout_predvla", root=tmp_path / "outputs" / "rollout_predvla")
+    entries = [json.loads(line) for line in (tmp_path / "outputs" / "replay_actions.jsonl").read_text().splitlines()]
+    assert {e["source"] for e in entries} == {"policy", "lerobot"}  # the return to the start pose between episodes
+    assert sum(e["source"] == "policy" for e in entries) == dataset.meta.total_frames
+    recorded = torch.stack([dataset[i][ACTION] for i in range(dataset.meta.total_frames)])
+    sent = torch.tensor([list(e["action"].values()) for e in entries if e["source"] == "policy"])
+    torch.testing.assert_close(sent, recorded, rtol=0, atol=1e-6)
+
+
+@pytest.mark.slow  # trains with lerobot-train, runs lerobot-rollout
 def test_lerobot_rollout_stops_on_a_misnamed_camera(so101):
     cameras = "{top: {type: predvla_replay, key: observation.images.front}, " \
               "wrist: {type: predvla_replay, key: observation.images.wrist}}"

@@ -42,3 +42,29 @@ def test_suite_checkpoint_loads_with_make_policy_and_acts_on_libero():
             obs, *_ = venv.step(np.asarray(action))
     finally:
         venv.close()
+
+
+def test_readme_quickstart_runs_as_written_with_fewer_steps(tmp_path):
+    """README's quickstart command, as written, with a 6-step cap and its output folder under tmp_path: both tasks,
+    2 episodes each, and no device warning (the shipped config leaves the device unset)."""
+    import json
+    import os
+    import shlex
+    import subprocess
+    import sys
+
+    readme = (CHECKPOINT.parents[1] / "README.md").read_text()
+    section = readme[readme.index("## Quickstart"):]
+    start = section.index("```bash\n") + len("```bash\n")
+    block = section[start:section.index("\n```", start)].replace("\\\n", " ")
+    (command,) = [line for line in block.splitlines() if line.startswith("lerobot-eval ")]
+    argv = shlex.split(command)
+    assert "--output_dir=outputs/quickstart" in argv
+    argv = [a if not a.startswith("--output_dir=") else f"--output_dir={tmp_path / 'quickstart'}" for a in argv]
+    argv[0] = str(Path(sys.executable).parent / argv[0])
+    result = subprocess.run([*argv, "--env.episode_length=6"], cwd=CHECKPOINT.parents[1], capture_output=True,
+                            text=True, timeout=900, env={**os.environ, "HF_HUB_OFFLINE": "1"})
+    assert result.returncode == 0, result.stderr[-3000:]
+    info = json.loads((tmp_path / "quickstart" / "eval_info.json").read_text())
+    assert [t["task_id"] for t in info["per_task"]] == [0, 1] and info["overall"]["n_episodes"] == 4
+    assert "is not available" not in result.stdout + result.stderr

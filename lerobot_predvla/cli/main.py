@@ -23,6 +23,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.cli.push",
     "lerobot_predvla.cli.bench",
     "lerobot_predvla.cli.build",
+    "lerobot_predvla.cli.robot_example",
 ]
 
 

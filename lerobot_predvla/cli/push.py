@@ -46,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"predvla push: error: {err}", file=sys.stderr)
         return 2
     if args.card_out is not None:
+        args.card_out.parent.mkdir(parents=True, exist_ok=True)
         args.card_out.write_bytes(files["README.md"])
     for name in sorted(files):
         print(f"  {name}")

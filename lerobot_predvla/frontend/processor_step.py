@@ -13,6 +13,7 @@ from lerobot.utils.constants import OBS_IMAGES
 from lerobot_predvla.frontend.artefact import FrontendArtefact, FrontendArtefactError
 from lerobot_predvla.frontend.frozen import FrozenFrontend
 from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.utils.threads import acting_threads
 
 # Set by the `predvla_libero` environment: 1 where the step's camera images are freshly rendered.
 OBS_IMAGE_FRESH = "observation.image_fresh"
@@ -111,6 +112,11 @@ class FrontendProcessorStep(ProcessorStep):
                 "--task='...' (or --dataset.single_task), as worded in the training dataset."
             )
         device = self._device(observation)
+        with acting_threads(device):  # one thread on the CPU unless OMP_NUM_THREADS is set (utils/threads.py)
+            return self._encode(transition, observation, tasks, device)
+
+    def _encode(self, transition: EnvTransition, observation: dict, tasks: list[str],
+                device: torch.device) -> EnvTransition:
         frontend = self.frontend(device)
         fresh = observation.get(OBS_IMAGE_FRESH)
         if self._vision is None:

@@ -212,13 +212,78 @@ def _suite_of(dataset_repo_id: str) -> str | None:
     return next((s for s in sorted(SUITES, key=len, reverse=True) if s in dataset_repo_id), None)
 
 
-def eval_command(policy_path: str, suite: str) -> str:
-    """The paper's protocol for `policy_path` (a Hub repo or a local directory); LeRobot picks the device."""
+def eval_command(policy_path: str, suite: str, episode_length: int = PAPER_EPISODE_LENGTH,
+                 episodes_per_task: int = PAPER_EPISODES_PER_TASK) -> str:
+    """`lerobot-eval` of `policy_path` (a Hub repo or a local directory) from the official init states, the paper's
+    protocol by default; LeRobot picks the device."""
     return (
         f"lerobot-eval --policy.path={policy_path} --env.type={EVAL_ENV_TYPE} --env.task={suite} "
-        f"--env.episode_length={PAPER_EPISODE_LENGTH} --eval.n_episodes={PAPER_EPISODES_PER_TASK} "
+        f"--env.episode_length={episode_length} --eval.n_episodes={episodes_per_task} "
         "--eval.batch_size=1 --eval.use_async_envs=false --output_dir=outputs/eval"
     )
+
+
+def eval_protocol(main: dict | None) -> str:
+    """What the card's evaluation command runs, and the paper's protocol where it differs."""
+    paper = (f"the paper's protocol: {PAPER_EPISODES_PER_TASK} rollouts per task from the official LIBERO initial "
+             f"states, each capped at {PAPER_EPISODE_LENGTH} control steps")
+    if main is None or (main["n_episodes_per_task"], main["episode_length"]) == (PAPER_EPISODES_PER_TASK,
+                                                                                  PAPER_EPISODE_LENGTH):
+        return paper[0].upper() + paper[1:] + "."
+    return (f"It reproduces the evaluation of the results below with this checkpoint's configuration: "
+            f"{main['n_episodes_per_task']} rollouts per task from the official LIBERO initial states, each capped at "
+            f"{main['episode_length']} control steps. For {paper}, pass `--env.episode_length={PAPER_EPISODE_LENGTH} "
+            f"--eval.n_episodes={PAPER_EPISODES_PER_TASK}`.")
+
+
+def _official(record: dict) -> bool:
+    return record.get("init_states", True) is not False
+
+
+def main_record(records: list[dict], config: dict) -> dict | None:
+    """The evaluation a card's command reproduces: the checkpoint as published (no inference override), from the
+    official init states, the most episodes first."""
+    plain = [r for r in records if _official(r) and not inference_settings(r, config)]
+    return max(plain, key=lambda r: (r["episodes"], -int(r["episode_length"])), default=None)
+
+
+def _rate(record: dict) -> str:
+    return f"{record['successes']}/{record['episodes']} ({100 * record['successes'] / record['episodes']:.1f}%)"
+
+
+def result_limitations(records: list[dict], baselines: list[dict], config: dict) -> str:
+    """Limitation lines that the checkpoint's own evaluations show: error regression against exact open loop on the
+    same starts, and the behaviour-cloning baselines trained on the same data in the same sweep."""
+    main = main_record(records, config)
+    if main is None:
+        return ""
+
+    def same_protocol(r: dict) -> bool:
+        return _official(r) and (r["episode_length"], r["n_episodes_per_task"]) == (
+            main["episode_length"], main["n_episodes_per_task"])
+
+    protocol = (f"{main['n_episodes_per_task']} episodes per task from the official init states, "
+                f"{main['episode_length']}-step cap")
+    lines = []
+    open_loop = [r for r in records if same_protocol(r)
+                 and {k: str(v) for k, v in inference_settings(r, config).items()} == {"er_iterations": "0"}]
+    if config.get("type") == "predvla" and config.get("er_iterations", 0) and open_loop:
+        ahead = main["successes"] - open_loop[0]["successes"]
+        verdict = (f"{ahead} more than" if ahead > 0 else "as many as" if ahead == 0 else f"{-ahead} fewer than")
+        from lerobot_predvla.experiments.headline import PAPER_OBJECT
+
+        lead = PAPER_OBJECT["error_regression"][0] - PAPER_OBJECT["open_loop"][0]
+        lines.append(f"- Error regression succeeds in {_rate(main)} episodes, {verdict} exact open loop "
+                     f"(`--policy.er_iterations=0`: {_rate(open_loop[0])}), {protocol}; the paper reports error "
+                     f"regression {lead:.2f} points ahead of exact open loop on libero_object.")
+    bc = [r for r in baselines if same_protocol(r) and r["results"] == main["results"]]
+    if bc and config.get("type") in ("predvla", "predvla_ladder"):
+        ahead = [r for r in bc if r["successes"] > main["successes"]]
+        listed = ", ".join(f"{r.get('label', r['config'])} {_rate(r)}" for r in sorted(bc, key=lambda r: r["config"]))
+        lines.append(f"- Behaviour-cloning baselines trained on the same demonstrations in the same sweep "
+                     f"(`{main['results']}`), {protocol}: {listed}; {len(ahead)} of {len(bc)} ahead of this "
+                     "checkpoint.")
+    return "".join(line + "\n" for line in lines)
 
 
 # ----- evaluation records of a checkpoint -----------------------------------------------------------------
@@ -252,6 +317,18 @@ def evaluation_records(checkpoint: Path, results_root: Path) -> list[dict]:
             and int(record["seed"]) == train_cfg.get("seed"))
         if same_dir or same_training:
             found.append({**record, "results": str(runs_dir.parent.relative_to(Path(results_root).parent))})
+    return found
+
+
+def baseline_records(records: list[dict], results_root: Path) -> list[dict]:
+    """The behaviour-cloning baselines' run records (`group: baseline`) in the sweeps that evaluated a checkpoint
+    (`records`, from `evaluation_records`): trained on the same data."""
+    found = []
+    for folder in sorted({r["results"] for r in records}):
+        for path in sorted((Path(results_root).parent / folder / "runs" / "records").glob("*/*/seed*.json")):
+            record = json.loads(path.read_text())
+            if record.get("group") == "baseline":
+                found.append({**record, "results": folder})
     return found
 
 
@@ -315,8 +392,8 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None, co
             f"| tasks | {len(dataset.tasks)}: {tasks} |",
         ]
     elif train_cfg is not None:
-        lines.append(f"Dataset `{train_cfg['dataset']['repo_id']}` (its metadata was not available when the card was "
-                     "written; the front end's fit above counts its demonstrations).")
+        lines.append(f"Dataset `{train_cfg['dataset']['repo_id']}` (not published with this checkpoint; the front "
+                     "end's fit above counts its demonstrations).")
     else:
         lines.append("The training dataset was not recorded with this checkpoint.")
     trained = [r for r in records or [] if (r.get("commands") or {}).get("train")]
@@ -477,10 +554,11 @@ def render_card(
     report: Path | None = None,
     report_config: str | None = None,
     records: list[dict] | None = None,
+    baselines: list[dict] | None = None,
 ) -> str:
     """The model card for the files about to be published, with every value filled in. `repo_id` is where a reader
     loads it from (a Hub repo, or a directory of this repository); `records`: its evaluations (`evaluation_records`),
-    shown instead of a report's aggregate."""
+    shown instead of a report's aggregate, and `baselines` the BC runs beside them (`baseline_records`)."""
     config = read_json(files, "config.json")
     train_cfg = read_json(files, "train_config.json") if "train_config.json" in files else None
     dataset_repo_id = dataset.repo_id if dataset else (train_cfg["dataset"]["repo_id"] if train_cfg else "unknown")
@@ -492,6 +570,8 @@ def render_card(
     own_fields = [f.name for f in dataclasses.fields(config_cls) if f.name not in lerobot_fields]
     features = {**config.get("input_features", {}), **config.get("output_features", {})}
     is_predictive = config["type"] == "predvla" or config.get("rung") in PREDICTIVE_RUNGS
+    main = main_record(records or [], config)
+    protocol = (main["episode_length"], main["n_episodes_per_task"]) if main else ()
     values = {
         "license": config.get("license") or "apache-2.0",
         "dataset_repo_id": dataset_repo_id,
@@ -513,10 +593,13 @@ def render_card(
         "config_rows": "\n".join(
             f"| `{k}` | {_format_value(config[k])}{PAPER_ONLY_NOTE if k in PAPER_ONLY_FIELDS else ''} |"
             for k in own_fields if k in config),
-        "eval_command": eval_command(repo_id, _suite_of(dataset_repo_id) or "libero_object"),
-        "episodes_per_task": str(PAPER_EPISODES_PER_TASK),
-        "episode_length": str(PAPER_EPISODE_LENGTH),
+        "eval_command": eval_command(repo_id, _suite_of(dataset_repo_id) or "libero_object", *protocol),
+        "eval_protocol": eval_protocol(main),
         "results_section": _results_section(report, report_config, records, config),
+        "result_limitations": result_limitations(records or [], baselines or [], config),
+        "seed_limitation": (f"This checkpoint is one training seed ({train_cfg['seed']}); " if train_cfg else "")
+        + "success rates vary substantially between training seeds of the same recipe: compare recipes over several "
+        "seeds.",
         "extra_limitations": "" if _suite_of(dataset_repo_id) else (
             f"- The training dataset `{dataset_repo_id}` is not a LIBERO suite: the evaluation command above is "
             "only the protocol's form."
@@ -546,8 +629,9 @@ def repository_files(checkpoint: Path, root: Path) -> dict[str, bytes]:
     writes them into the checkpoint (its weights are never rewritten)."""
     checkpoint, root = Path(checkpoint).resolve(), Path(root).resolve()
     files = without_machine_paths(publishable_files(checkpoint))
-    card = render_card(files, checkpoint.relative_to(root).as_posix(),
-                       records=evaluation_records(checkpoint, root / "results"))
+    records = evaluation_records(checkpoint, root / "results")
+    card = render_card(files, checkpoint.relative_to(root).as_posix(), records=records,
+                       baselines=baseline_records(records, root / "results"))
     return {**{rel: src for rel, src in files.items() if isinstance(src, bytes)}, CARD_FILE: card.encode()}
 
 
@@ -597,9 +681,10 @@ def push_checkpoint(
     repository's `results/`, whose sweep run records of this checkpoint fill the card's results (`evaluation_records`).
     """
     files, dataset_root = collect_checkpoint(checkpoint, frontend)
-    records = None
+    records = baselines = None
     if report is not None and Path(report).is_dir() and not (Path(report) / SUMMARY_FILE).is_file():
         records = evaluation_records(pretrained_dir(checkpoint), report)
+        baselines = baseline_records(records, report)
         if not records:
             raise HubError(f"{report}: neither a report ({SUMMARY_FILE}) nor a results folder with run records "
                            f"(*/runs/records/) of {checkpoint}.")
@@ -610,7 +695,8 @@ def push_checkpoint(
         repo = json.loads(files["train_config.json"].read_text())["dataset"]["repo_id"]
         dataset = DatasetSummary.from_root(repo, dataset_root)
     published = without_machine_paths(files)
-    published[CARD_FILE] = render_card(published, repo_id, dataset, report, report_config, records).encode()
+    published[CARD_FILE] = render_card(published, repo_id, dataset, report, report_config, records,
+                                       baselines).encode()
     published[MANIFEST_FILE] = manifest_text(published).encode()  # SHA-256 of every file of the commit
     if dry_run:
         return published, None

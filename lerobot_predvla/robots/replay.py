@@ -7,6 +7,7 @@ per `get_observation()`, so they stay in step; at the end of the episode they st
 
 import json
 import logging
+import sys
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,9 @@ from lerobot_predvla.robots.config_replay import (
     DatasetReplayRobotConfig,
     RecordedLayout,
 )
+
+# lerobot-rollout's function that sends the policy's action of a tick (lerobot/rollout/strategies/core.py, 0.6.1).
+POLICY_STEP = "send_next_action"
 
 
 class RecordedEpisode:
@@ -52,6 +56,19 @@ class RecordedEpisode:
 def recorded_episode(root: str, episode: int) -> RecordedEpisode:
     """One reader per (dataset, episode), shared by the robot and its cameras."""
     return RecordedEpisode(root, episode)
+
+
+def action_source(depth: int = 12) -> str:
+    """"policy" when the action comes from lerobot-rollout's policy step (`send_next_action`), else "lerobot": the
+    moves LeRobot makes by itself (interpolating back to the start pose between episodes and at the end)."""
+    frame = sys._getframe(2)
+    for _ in range(depth):
+        if frame is None:
+            break
+        if frame.f_code.co_name == POLICY_STEP:
+            return "policy"
+        frame = frame.f_back
+    return "lerobot"
 
 
 def as_camera_frame(image: torch.Tensor) -> np.ndarray:
@@ -172,8 +189,9 @@ class DatasetReplayRobot(Robot):
         sent = {name: float(action[name]) for name in self.layout.action_names}
         self.actions.append(sent)
         if self.config.action_log is not None:
+            entry = {"tick": self.position - 1, "source": action_source(), "action": sent}
             with open(self.config.action_log, "a") as log:
-                log.write(json.dumps({"tick": self.position - 1, "action": sent}) + "\n")
+                log.write(json.dumps(entry) + "\n")
         return sent
 
     def disconnect(self) -> None:

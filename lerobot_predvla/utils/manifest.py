@@ -104,6 +104,6 @@ def verify_manifests(*directories: Path) -> bool:
             if sha256_file(path) != entry["sha256"]:
                 raise CheckpointError(f"{path}: altered: its SHA-256 differs from the one in {MANIFEST_FILE}.")
     if unverified:
-        logging.info("No %s in %s (an older checkpoint or another tool's): files not verified.", MANIFEST_FILE,
-                     ", ".join(unverified))
+        logging.info("No %s in %s (a checkpoint saved without one, or another tool's): files not verified.",
+                     MANIFEST_FILE, ", ".join(unverified))
     return not unverified

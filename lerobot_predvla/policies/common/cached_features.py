@@ -5,6 +5,7 @@ PredVLA (`predvla`, `predvla_ladder`) and the observation-driven baselines (`pre
 actions with the same Gaussian-mixture head and train on whole episodes held in memory.
 """
 
+import logging
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -32,6 +33,19 @@ def cached_feature_normalization() -> dict[str, NormalizationMode]:
         "ENV": NormalizationMode.IDENTITY,
         "ACTION": NormalizationMode.MIN_MAX,
     }
+
+
+def best_device() -> str:
+    """The device LeRobot picks when none is set (its `auto_select_torch_device`: CUDA, MPS, XPU, else the CPU), without
+    the log lines it writes about that choice."""
+    from lerobot.configs import policies
+
+    previous = logging.root.manager.disable
+    logging.disable(logging.WARNING)
+    try:
+        return policies.auto_select_torch_device().type
+    finally:
+        logging.disable(previous)
 
 
 def use_dataset_frontend(config: "CachedFeaturesConfig", dataset_root: Path) -> None:
@@ -108,6 +122,8 @@ class CachedFeaturesConfig(PreTrainedConfig):
     normalization_mapping: dict[str, NormalizationMode] = field(default_factory=cached_feature_normalization)
 
     def __post_init__(self) -> None:
+        if not self.device:  # unset (every shipped config): LeRobot's choice, without its warning about "None"
+            self.device = best_device()
         super().__post_init__()
         if self.visual_refresh_interval < 1:
             raise ValueError(f"`visual_refresh_interval` must be >= 1, got {self.visual_refresh_interval}.")

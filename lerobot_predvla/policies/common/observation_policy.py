@@ -26,6 +26,7 @@ from lerobot_predvla.policies.common.training_guard import TrainingGuard
 from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
 from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
+from lerobot_predvla.utils.threads import acting_threads
 
 BASELINE_TRAIN_STEPS = 50_000  # Section 4.4: baselines train for 50,000 steps (PredVLA: 30,000)
 
@@ -153,8 +154,11 @@ class ObservationPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
-        """The action of this control step, always finite (`ObservationGuard.safe_action`)."""
-        return self.guard.safe_action(self.act(*self.observe(batch)))
+        """The action of this control step, always finite (`ObservationGuard.safe_action`); on the CPU on one thread
+        unless OMP_NUM_THREADS is set (utils/threads.py)."""
+        observed = self.observe(batch)
+        with acting_threads(observed[0].device):
+            return self.guard.safe_action(self.act(*observed))
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:

@@ -22,10 +22,12 @@ from lerobot_predvla.policies.predvla.corruption import ObservationCorruption
 from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
+from lerobot_predvla.policies.predvla.recurrence_cpp import auto_uses_cpp
 from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
 from lerobot_predvla.utils.checkpoints import kill_point
 from lerobot_predvla.utils.manifest import verify_manifests
 from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
+from lerobot_predvla.utils.threads import acting_threads
 
 
 def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
@@ -98,6 +100,8 @@ class PredVLAPolicy(PreTrainedPolicy):
         config.validate_features()
         self.config = config
         self.model = PredictiveModel(config)
+        if config.recurrence_backend == "auto" and torch.device(config.device).type == "cpu":
+            auto_uses_cpp()  # build or load the compiled loops now (once per Python and torch), not at the first tick
         count = sum(p.numel() for p in self.network_parameters())
         paper = f"; Table 1: {PREDVLA_PAPER_PARAMETERS:,}" if has_paper_layout(config) else ""
         logging.info("PredVLA: %s trainable parameters (%s%s)", f"{count:,}", feature_layout(config), paper)
@@ -275,8 +279,10 @@ class PredVLAPolicy(PreTrainedPolicy):
         self.control_step += 1
         (language, vision, proprio), (_, vision_ok, proprio_ok) = self.guard(batch)
         # Error regression runs in float32 also under `--policy.use_amp` (lerobot-eval's autocast): at batch 1 its
-        # matmuls are slower in bfloat16 on CPU, and its Adam steps on the window are small.
-        with torch.inference_mode(False), torch.enable_grad(), torch.autocast(vision.device.type, enabled=False):
+        # matmuls are slower in bfloat16 on CPU, and its Adam steps on the window are small. On the CPU it runs on
+        # one thread unless OMP_NUM_THREADS is set (utils/threads.py).
+        with torch.inference_mode(False), torch.enable_grad(), torch.autocast(vision.device.type, enabled=False), \
+                acting_threads(vision.device):
             # Inputs created in inference mode cannot enter autograd: clone them out of it.
             inputs = [x.clone() for x in (language, vision, proprio, vision_ok, proprio_ok)]
             action = self.error_regression(*inputs).detach()
