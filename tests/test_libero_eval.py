@@ -201,7 +201,7 @@ def test_published_files_reproduce_actions_front_end_included(checkpoint, tmp_pa
     from lerobot.policies.factory import make_pre_post_processors
 
     from lerobot_predvla import PredVLAConfig, PredVLAPolicy
-    from lerobot_predvla.hub.publish import collect_checkpoint
+    from lerobot_predvla.hub.upload import collect_checkpoint
 
     files, _ = collect_checkpoint(checkpoint)
     assert any("predvla_frontend_processor" in name and name.endswith(".safetensors") for name in files)

@@ -43,6 +43,7 @@ from lerobot_predvla.experiments.lr_selection import (
 )
 from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from lerobot_predvla.policies.recipe import NOT_RECIPE
 from lerobot_predvla.utils.checkpoints import last_pretrained, prune_checkpoints
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.manifest import sha256_file
@@ -57,8 +58,6 @@ GROUPS = ("main", "baseline", "ladder", "ablation", "corruption")
 CORRUPTION_SOURCE = {"libero_spatial": "libero_goal", "libero_goal": "libero_object",
                      "libero_object": "libero_spatial", "libero_10": "libero_spatial"}
 CORRUPTION_KEYS = {"channel", "alpha", "source_suite", "episode", "open_loop"}
-# Policy fields that say where or how fast a run computes, not what it computes.
-NOT_RECIPE = frozenset({"type", "push_to_hub", "device", "recurrence_backend", "use_amp", "repo_id"})
 TRAIN_DONE_FILE = "predvla_sweep_train.json"  # written beside a finished training's checkpoints
 EVAL_WALL_FILE = "predvla_sweep_eval.json"  # wall time of one evaluation part, beside its eval_info.json
 
