@@ -20,14 +20,8 @@ from lerobot.envs.configs import EnvConfig, LiberoEnv
 from lerobot.scripts import lerobot_eval
 from lerobot.utils.constants import CHECKPOINTS_DIR
 
-from lerobot_predvla.envs.configs import (
-    GRIPPER_DIM,
-    JOINT_DIM,
-    LEROBOT_LIBERO_STATE_DIM,
-    PredVLALiberoEnv,
-    fault_summary,
-    libero_env_processors,
-)
+from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM, LEROBOT_LIBERO_STATE_DIM
+from lerobot_predvla.envs.configs import PredVLALiberoEnv, fault_summary, libero_env_processors
 from lerobot_predvla.libero.config_path import use_venv_config
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig

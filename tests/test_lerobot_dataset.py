@@ -22,12 +22,8 @@ from lerobot.utils.constants import OBS_STATE
 from lerobot_factory import LIBERO_COMMUNITY, SO101, Layout, make_dataset
 from test_conversion import run_cli
 
+from lerobot_predvla.columns import FRONTEND_META_DIR, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.frontend import FrozenFrontend
-from lerobot_predvla.policies.common.cached_features import (
-    FRONTEND_META_DIR,
-    OBS_LANGUAGE_FEATURES,
-    OBS_VISION_FEATURES,
-)
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 
 BIN = Path(sys.executable).parent

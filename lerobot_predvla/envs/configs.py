@@ -37,11 +37,10 @@ from lerobot.envs.configs import EnvConfig, LiberoEnv, _make_vec_env_cls
 from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline, ProcessorStepRegistry
 from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 
+from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM
 from lerobot_predvla.envs.fault_injection import FaultInjectionStep
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
 
-JOINT_DIM, GRIPPER_DIM = 7, 2
-LEROBOT_LIBERO_STATE_DIM = 8  # LeRobot's LiberoProcessorStep: eef position 3 + axis-angle 3 + gripper 2
 OBS_ROBOT_STATE = "observation.robot_state"
 
 

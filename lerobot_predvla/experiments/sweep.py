@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
+from lerobot_predvla.columns import SUITES
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
 from lerobot_predvla.experiments.logs import compact_log
 from lerobot_predvla.experiments.lr_selection import (
@@ -42,7 +43,7 @@ from lerobot_predvla.experiments.lr_selection import (
     selection_path,
 )
 from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
-from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK
 from lerobot_predvla.policies.recipe import NOT_RECIPE
 from lerobot_predvla.utils.checkpoints import last_pretrained, prune_checkpoints
 from lerobot_predvla.utils.io import atomic_write_json
@@ -682,8 +683,8 @@ class Runner:
 
     @staticmethod
     def missing_demo_tasks(suite: str, spec: DataSpec, hdf5: Path) -> list[int]:
-        from lerobot_predvla.data.hdf5_layout import task_file
         from lerobot_predvla.libero.env import num_tasks, task_spec
+        from lerobot_predvla.libero.hdf5_layout import task_file
 
         tasks = spec.tasks if spec.tasks is not None else range(num_tasks(suite))
         return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]

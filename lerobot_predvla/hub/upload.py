@@ -21,6 +21,7 @@ from pathlib import Path
 
 from huggingface_hub import CommitOperationAdd, HfApi
 
+from lerobot_predvla.columns import FRONTEND_META_DIR
 from lerobot_predvla.frontend.artefact import METADATA_FILE, TENSORS_FILE
 from lerobot_predvla.hub.card import (
     CARD_FILE,
@@ -35,7 +36,6 @@ from lerobot_predvla.hub.card import (
     read_json,
     render_card,
 )
-from lerobot_predvla.policies.common.cached_features import FRONTEND_META_DIR
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 from lerobot_predvla.utils.checkpoints import REQUIRED_FILES, find_pretrained
 from lerobot_predvla.utils.manifest import MANIFEST_FILE, manifest_text

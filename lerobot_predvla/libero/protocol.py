@@ -1,6 +1,5 @@
 """The LIBERO evaluation protocol: suites, per-suite step caps and the paper's rollout counts (one definition)."""
 
-SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
 SHORT_SUITES = ("libero_spatial", "libero_goal", "libero_object")  # the paper's column order (Table 3)
 SUITE_LABELS = {"libero_spatial": "spatial", "libero_goal": "goal", "libero_object": "object", "libero_10": "long"}
 

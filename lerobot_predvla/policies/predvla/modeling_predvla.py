@@ -16,6 +16,7 @@ from lerobot_predvla.policies.common.cached_features import (
     use_dataset_frontend,
 )
 from lerobot_predvla.policies.common.observation_guard import REPORT_INTERVAL_S, ObservationGuard
+from lerobot_predvla.policies.common.sequence_table import EpisodeSequences
 from lerobot_predvla.policies.common.training_guard import TrainingGuard
 from lerobot_predvla.policies.predvla.configuration_predvla import PREDVLA_PAPER_PARAMETERS, PredVLAConfig
 from lerobot_predvla.policies.predvla.corruption import ObservationCorruption
@@ -23,7 +24,6 @@ from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
 from lerobot_predvla.policies.predvla.recurrence_cpp import auto_uses_cpp
-from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
 from lerobot_predvla.utils.checkpoints import kill_point
 from lerobot_predvla.utils.manifest import verify_manifests
 from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
