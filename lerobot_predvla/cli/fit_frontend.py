@@ -56,7 +56,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def _language_instructions(source: str) -> tuple[str, ...] | None:
     if source == "demos":
         return None
-    from lerobot_predvla.libero.env import libero_instructions
+    from lerobot_predvla.libero.env import libero_instructions  # the simulator's tasks (sets MUJOCO_GL)
 
     return libero_instructions()
 

@@ -29,7 +29,10 @@ from lerobot.utils.constants import CHECKPOINTS_DIR
 from lerobot.utils.constants import PRETRAINED_MODEL_DIR as PRETRAINED_DIR
 from tqdm import tqdm
 
+from lerobot_predvla.policies.predvla import diagnostics as dx
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
+from lerobot_predvla.policies.predvla.diagnostics import TOP_WEIGHTS
+from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
 from lerobot_predvla.utils.checkpoints import find_pretrained
 from lerobot_predvla.utils.io import atomic_save_figure
 
@@ -84,8 +87,6 @@ def dataset_root(checkpoint: Path) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lerobot_predvla.policies.predvla import diagnostics as dx
-
     try:
         variants = [dx.parse_er_variant(text) for text in args.er_variant]
         if variants and args.no_er:
@@ -97,8 +98,6 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         print(f"predvla inspect: error: {err}", file=sys.stderr)
         return 2
-    from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
-
     out = args.out or (args.checkpoint / "inspect")
     out.mkdir(parents=True, exist_ok=True)
     history, data = [], None
@@ -150,8 +149,6 @@ def print_summary(report: dict) -> None:
         print(f"posteriors {name:>8}: |c_q| {p['mean_norm']:.3f}, per-task means {p['between_task_mean_distance']:.3f}"
               f" apart vs {p['within_task_spread']:.3f} within a task, |c_q - c_p| {p['prior_gap']:.3f}")
     if "forces" in report:
-        from lerobot_predvla.policies.predvla.diagnostics import TOP_WEIGHTS
-
         f = report["forces"]
         print(f"gradient norm {f['grad_norm']:.1f}, clipped to {f['grad_clip_norm']:g} (scale {f['clip_scale']:.3f});"
               f" weight decay {f['weight_decay']:g} against the clipped loss gradient (batch / Adam's momentum):")
@@ -329,8 +326,6 @@ def training_curves(plt, steps: list[int], history: list[dict], tasks: int):
     axes[5].plot(steps, [x["language_drive_norm"] for x in lang], label="|W_lang l|")
     axes[5].set(title="language drive of T (Eq. 4)")
     if all("forces" in h for h in history):
-        from lerobot_predvla.policies.predvla.diagnostics import TOP_WEIGHTS
-
         for label, name in TOP_WEIGHTS.items():
             line, = axes[6].plot(steps, [h["forces"]["weights"][name]["norm"] for h in history], label=label)
             axes[7].plot(steps, [h["forces"]["weights"][name].get("momentum_decay_over_loss", float("nan"))

@@ -19,6 +19,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from lerobot_predvla.cli import convert, fit_frontend
+from lerobot_predvla.data.example_datasets import SO101, make_dataset
 from lerobot_predvla.utils.checkpoints import last_pretrained
 
 EPISODES = [("pick up the red cube", 30), ("put the cube in the box", 30), ("pick up the red cube", 30)]
@@ -34,9 +36,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lerobot_predvla.cli import convert, fit_frontend
-    from lerobot_predvla.data.example_datasets import SO101, make_dataset
-
     out: Path = args.out
     recordings, frontend, converted, train = (out / name for name in
                                               ("so101_recordings", "so101_frontend", "so101_predvla", "predvla_so101"))

@@ -15,6 +15,9 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from lerobot_predvla.data.synthetic import make_synthetic_dataset
+from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
 from lerobot_predvla.utils.checkpoints import last_pretrained
 from lerobot_predvla.utils.io import atomic_save_figure
 
@@ -37,8 +40,6 @@ def replay(
     """Mean squared action error over replayed episodes and the first episode's actions."""
     from lerobot.datasets import LeRobotDataset
     from lerobot.policies.factory import make_pre_post_processors
-
-    from lerobot_predvla import PredVLAConfig, PredVLAPolicy
 
     config = PredVLAConfig.from_pretrained(checkpoint)
     config.er_iterations, config.device = er_iterations, device
@@ -63,8 +64,6 @@ def replay(
 
 
 def run(args: argparse.Namespace) -> int:
-    from lerobot_predvla.data.synthetic import make_synthetic_dataset
-
     print(f"{BANNER}\nSYNTHETIC DEMO: a generated dataset stands in for LIBERO (no simulator involved).\n{BANNER}")
     out: Path = args.out
     dataset_root, train_dir = out / "dataset", out / "train"

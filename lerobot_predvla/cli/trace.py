@@ -19,6 +19,10 @@ import json
 import sys
 from pathlib import Path
 
+from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
+from lerobot_predvla.policies.predvla.trace import TraceRecorder, plot_traces
+from lerobot_predvla.utils.io import atomic_write_json
+
 TRACE_FILE = "trace.json"
 FIGURE_FILE = "trace.png"
 
@@ -46,10 +50,6 @@ def load_trace(directory: Path) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
-    from lerobot_predvla.policies.predvla.trace import TraceRecorder, plot_traces
-    from lerobot_predvla.utils.io import atomic_write_json
-
     try:
         if args.episode < 0:
             raise ValueError(f"--episode must be >= 0, got {args.episode}.")

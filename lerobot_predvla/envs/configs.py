@@ -114,7 +114,7 @@ class PredVLALiberoEnv(LiberoEnv):
         return {**super().gym_kwargs, "render_interval": self.render_interval}
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False):
-        from lerobot_predvla.envs.predvla_libero import create_envs
+        from lerobot_predvla.envs.predvla_libero import create_envs  # the simulator, loaded once an env is built
 
         if self.task is None:
             raise ValueError("--env.task is required (a LIBERO suite, e.g. libero_object).")

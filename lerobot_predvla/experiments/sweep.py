@@ -683,8 +683,8 @@ class Runner:
 
     @staticmethod
     def missing_demo_tasks(suite: str, spec: DataSpec, hdf5: Path) -> list[int]:
-        from lerobot_predvla.libero.env import num_tasks, task_spec
-        from lerobot_predvla.libero.hdf5_layout import task_file
+        from lerobot_predvla.libero.env import num_tasks, task_spec  # the simulator's tasks (sets MUJOCO_GL)
+        from lerobot_predvla.libero.hdf5_layout import task_file  # imports libero.env
 
         tasks = spec.tasks if spec.tasks is not None else range(num_tasks(suite))
         return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]

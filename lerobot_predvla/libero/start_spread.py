@@ -14,10 +14,14 @@ import argparse
 import sys
 from pathlib import Path
 
+import h5py
 import numpy as np
+from tqdm import tqdm
 
 from lerobot_predvla.columns import SUITES
-from lerobot_predvla.libero.env import make_env, official_init_states, random_reset, task_spec
+from lerobot_predvla.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
+from lerobot_predvla.libero.hdf5_layout import task_file
+from lerobot_predvla.utils.io import atomic_write_json
 
 RESET_SEED = 1000  # randomised resets start from this seed, away from the demonstrations' (`predvla demos`)
 
@@ -63,10 +67,6 @@ def start_spread(suite: str, task_id: int, n: int = 20, init_noise: float = 0.0)
 def demo_start_spread(hdf5_root: Path, suite: str, task_id: int) -> dict[str, dict]:
     """The recorded demonstrations' first simulator states (`states[0]` of each demo in the task's hdf5 file) beside
     the task's official init states, as `start_spread` measures them ("demonstrations", "official")."""
-    import h5py
-
-    from lerobot_predvla.libero.hdf5_layout import task_file
-
     spec = task_spec(suite, task_id)
     path = task_file(hdf5_root, spec)
     if not path.is_file():
@@ -115,11 +115,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def print_demo_spread(hdf5_root: Path, suite: str, out: Path | None) -> int:
-    from tqdm import tqdm
-
-    from lerobot_predvla.libero.env import num_tasks
-    from lerobot_predvla.utils.io import atomic_write_json
-
     try:
         table = {task_id: demo_start_spread(hdf5_root, suite, task_id)
                  for task_id in tqdm(range(num_tasks(suite)), desc=f"{suite} starts", unit="task")}

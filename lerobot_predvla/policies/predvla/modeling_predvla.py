@@ -158,7 +158,7 @@ class PredVLAPolicy(PreTrainedPolicy):
         (`hub/predvla_card.md`), never the training posteriors. LeRobot pushes the processors afterwards."""
         if peft_model is not None:
             raise NotImplementedError("PredVLA is trained in full; --policy.use_peft is not supported.")
-        from lerobot_predvla.hub.upload import push_policy
+        from lerobot_predvla.hub.upload import push_policy  # the hub sits above the policies: loaded to publish
 
         return self._without_posteriors(
             push_policy, self, self.config.repo_id, cfg=cfg, state_dict=state_dict, dataset_meta=dataset_meta,
@@ -169,7 +169,7 @@ class PredVLAPolicy(PreTrainedPolicy):
         """Publish this policy (network, config, PredVLA card; no posteriors) to `repo_id`."""
         if card_kwargs:
             raise ValueError("PredVLA's model card is rendered from hub/predvla_card.md; card_kwargs are not used.")
-        from lerobot_predvla.hub.upload import push_policy
+        from lerobot_predvla.hub.upload import push_policy  # the hub sits above the policies: loaded to publish
 
         return self._without_posteriors(push_policy, self, repo_id, private=private)
 
@@ -179,8 +179,8 @@ class PredVLAPolicy(PreTrainedPolicy):
         """PredVLA's card (`hub/predvla_card.md`) instead of LeRobot's generic one (same signature)."""
         from huggingface_hub import ModelCard
 
-        from lerobot_predvla.hub.card import DatasetSummary, render_card
-        from lerobot_predvla.hub.upload import publishable_files, without_machine_paths
+        from lerobot_predvla.hub.card import DatasetSummary, render_card  # the hub sits above the policies
+        from lerobot_predvla.hub.upload import publishable_files, without_machine_paths  # (loaded to publish)
 
         with tempfile.TemporaryDirectory() as tmp:
             self._without_posteriors(self.save_pretrained, Path(tmp))

@@ -1,0 +1,151 @@
+"""The package's shape, read from its imports with `ast`: no import cycle, no import against the layering.
+
+Parts are the top-level modules and folders of `lerobot_predvla` (a policy folder under `policies/` is a part of its
+own). `ALLOWED` lists, bottom up, the parts each part may import; `EXCEPTIONS` the imports that still run against it,
+each with its reason (the test fails once one is no longer needed, so the list only shrinks).
+"""
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+PACKAGE = "lerobot_predvla"
+ROOT = Path(__file__).resolve().parents[1] / PACKAGE
+
+_BASE = {"utils", "columns"}
+_POLICIES = {"policies", "policies.common", "policies.predvla", "policies.bc_rnn", "policies.bc_transformer",
+             "policies.ladder"}
+_BELOW_SIMULATOR = _BASE | {"frontend", "data", "robots"} | _POLICIES
+ALLOWED = {
+    "utils": set(),
+    "columns": set(),  # column names and shared constants
+    "frontend": _BASE,
+    "data": _BASE | {"frontend"},  # every reader, and what runs the front end over a dataset
+    "robots": _BASE,
+    "policies": _BASE,  # POLICY_TYPES and the recipe fields of a policy config
+    "policies.common": _BASE | {"frontend", "policies"},  # the shared layer of every policy
+    "policies.predvla": _BASE | {"frontend", "policies", "policies.common"},
+    "policies.bc_rnn": _BASE | {"frontend", "policies", "policies.common"},
+    "policies.bc_transformer": _BASE | {"frontend", "policies", "policies.common"},
+    "policies.ladder": _BASE | {"frontend", "policies", "policies.common", "policies.predvla"},  # PredVLA, cut down
+    "libero": _BASE,  # the simulator
+    "envs": _BASE | {"libero", "policies.common"},
+    "hub": _BELOW_SIMULATOR | {"libero"},
+    "lerobot_integration": _BELOW_SIMULATOR | {"libero", "envs"},
+    "experiments": _BELOW_SIMULATOR | {"libero", "envs", "hub"},
+    "cli": _BELOW_SIMULATOR | {"libero", "envs", "hub", "experiments"},
+}
+# (importing module, imported part): why the import runs against ALLOWED for now.
+EXCEPTIONS = {
+    # push_to_hub, push_model_to_hub and generate_model_card are LeRobot's methods of the policy: they reach the hub
+    # from inside the functions.
+    ("policies.predvla.modeling_predvla", "hub"): "LeRobot's publishing methods live on the policy",
+    # The mixture head and the masks every baseline shares are still defined in PredVLA's folder.
+    ("policies.bc_rnn.modeling_predvla_bc_rnn", "policies.predvla"): "GMMActionHead, masked_mean",
+    ("policies.bc_transformer.modeling_predvla_bc_transformer", "policies.predvla"): "GMMActionHead, masked_mean",
+}
+# Function-level imports of the package's own modules (each says why it waits for its call).
+MAX_FUNCTION_LEVEL_IMPORTS = 9
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def part_of(module: str) -> str:
+    """`lerobot_predvla.policies.predvla.x` -> `policies.predvla`; `lerobot_predvla.hub.card` -> `hub`; the
+    package's own `__init__` (the registration, which imports every part) -> ``."""
+    names = module.split(".")[1:]
+    if len(names) > 1 and names[0] == "policies" and (ROOT / "policies" / names[1]).is_dir():
+        return f"policies.{names[1]}"
+    return names[0] if names else ""
+
+
+def own_imports(path: Path, module: str) -> list[tuple[str, bool, int]]:
+    """(imported module of the package, inside a function, line) for every import of `path`."""
+    tree = ast.parse(path.read_text())
+    in_function = {id(node) for f in ast.walk(tree) if isinstance(f, ast.FunctionDef | ast.AsyncFunctionDef)
+                   for node in ast.walk(f)}
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            targets = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, *([base] if base else [])])
+            targets = [f"{base}.{alias.name}" for alias in node.names]
+            targets = [t if MODULES.get(t) else base for t in targets]
+        else:
+            continue
+        for target in targets:
+            if target == PACKAGE or target.startswith(PACKAGE + "."):
+                found.append((target, id(node) in in_function, node.lineno))
+    return found
+
+
+MODULES = {module_name(p): p for p in sorted(ROOT.rglob("*.py"))}
+IMPORTS = {module: own_imports(path, module) for module, path in MODULES.items()}
+
+
+def graph() -> dict[str, set[str]]:
+    edges = defaultdict(set)
+    for module, imports in IMPORTS.items():
+        edges[module] |= {target for target, _, _ in imports if target != module}
+    return edges
+
+
+def test_no_import_cycle():
+    edges, state, cycles = graph(), {}, []
+
+    def visit(module: str, stack: list[str]) -> None:
+        state[module] = "open"
+        for target in sorted(edges[module]):
+            if state.get(target) == "open":
+                cycles.append(stack[stack.index(target):] + [target])
+            elif target not in state:
+                visit(target, [*stack, target])
+        state[module] = "done"
+
+    for module in sorted(MODULES):
+        if module not in state:
+            visit(module, [module])
+    assert not cycles, "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
+
+
+def test_nothing_imports_the_package_root():
+    """Only LeRobot's plugin loader and users import `lerobot_predvla` itself (the registration)."""
+    assert not [m for m, imports in IMPORTS.items() for target, _, _ in imports if target == PACKAGE]
+
+
+def test_every_import_follows_the_layering():
+    unused = set(EXCEPTIONS)
+    against = []
+    for module, imports in IMPORTS.items():
+        part = part_of(module)
+        assert part == "" or part in ALLOWED, f"{module}: part {part!r} is missing from ALLOWED"
+        for target, _, _ in imports:
+            target_part = part_of(target)
+            if part == "" or target_part in ("", part) or target_part in ALLOWED[part]:
+                continue
+            key = (module.removeprefix(PACKAGE + "."), target_part)
+            if key in EXCEPTIONS:
+                unused.discard(key)
+            else:
+                against.append(f"{module} -> {target}")
+    assert not against, "imports against the layering:\n" + "\n".join(sorted(set(against)))
+    assert not unused, f"exceptions no longer needed (remove them): {sorted(unused)}"
+
+
+def test_function_level_imports_of_the_package_are_few_and_say_why():
+    """At most MAX_FUNCTION_LEVEL_IMPORTS import statements of the package's own modules wait for their function's
+    call, each with a comment (on its line or the line above) saying why."""
+    found = sorted({(module, line) for module, imports in IMPORTS.items() for _, inside, line in imports if inside})
+    assert len(found) <= MAX_FUNCTION_LEVEL_IMPORTS, "\n".join(f"{m}:{line}" for m, line in found)
+    for module, line in found:
+        lines = MODULES[module].read_text().splitlines()
+        statement, above = lines[line - 1], lines[line - 2].strip()
+        assert "#" in statement or above.startswith("#"), f"{module}:{line}: say why this import waits for its call"
