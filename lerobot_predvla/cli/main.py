@@ -17,6 +17,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.cli.convert",
     "lerobot_predvla.cli.features_only",
     "lerobot_predvla.cli.inspect",
+    "lerobot_predvla.cli.mechanism",
     "lerobot_predvla.cli.trace",
     "lerobot_predvla.cli.sweep",
     "lerobot_predvla.cli.report",
