@@ -173,7 +173,7 @@ def _entry(task: dict) -> dict:
                 is not None, "plan_steps": plan["source_steps"], "excluded_states": plan["excluded_states"]}
 
     return {**numbers(first), "task_name": task["task_name"], "states": task["settings"]["states"],
-            "cap": task["settings"]["cap"], NEAREST_MEAN_KEY: numbers(second)}
+            "cap": task["settings"]["cap"], "seconds": task["seconds"], NEAREST_MEAN_KEY: numbers(second)}
 
 
 def collect(out: Path) -> dict[str, dict[str, dict]]:
@@ -227,12 +227,14 @@ def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
         lines += [f"## {suite}", "",
                   f"Replay states {_states_text(first['states'])}, {first['cap']}-step cap. "
                   f"Plan from state 0: **{s0}/{n0} ({_pct(s0, n0)})**; plan from the nearest-mean state: "
-                  f"**{s1}/{n1} ({_pct(s1, n1)})**.", ""]
+                  f"**{s1}/{n1} ({_pct(s1, n1)})**. Wall time {sum(t['seconds'] for t in tasks.values()) / 60:.0f} "
+                  "min (one process, physics only).", ""]
         missing = expected_tasks.get(suite, 0) - len(tasks)
         if missing > 0:
             lines += [f"{missing} of {expected_tasks[suite]} tasks not run yet.", ""]
-        lines += ["| task | state-0 plan | steps | expert / own start | nearest-mean source | plan | steps | "
-                  "expert / own start | name |", "|---|---|---|---|---|---|---|---|---|"]
+        lines += ["| task | plan from state 0: successes | its steps | expert / own start | nearest-mean source "
+                  "state | its plan: successes | its steps | expert / own start | wall time (s) | name |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
         for task_id, t in tasks.items():
             m = t[NEAREST_MEAN_KEY]
 
@@ -242,7 +244,7 @@ def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
 
             lines.append(f"| {task_id} | {t['successes']}/{t['episodes']} | {t['plan_steps']} | {ok(t)} | "
                          f"{m['source_state']} | {m['successes']}/{m['episodes']} | {m['plan_steps']} | {ok(m)} | "
-                         f"{t['task_name']} |")
+                         f"{t['seconds']:.0f} | {t['task_name']} |")
         failed = [task_id for task_id, t in tasks.items() if not t["source_success"]
                   or not t[NEAREST_MEAN_KEY]["source_success"]]
         if failed:
@@ -262,7 +264,7 @@ def figure(report: dict, path: Path) -> None:
     from lerobot_predvla.utils.io import atomic_save_figure
 
     suites = list(report)
-    fig, axes = plt.subplots(len(suites), 1, figsize=(9, 2.6 * len(suites)), squeeze=False)
+    fig, axes = plt.subplots(len(suites), 1, figsize=(9, 2.6 * len(suites) + 0.6), squeeze=False)
     for ax, suite in zip(axes[:, 0], suites, strict=True):
         tasks = report[suite]
         x = np.arange(len(tasks))
@@ -272,14 +274,17 @@ def figure(report: dict, path: Path) -> None:
             ax.bar(x + offset, [100 * r["successes"] / max(r["episodes"], 1) for r in rows], width=0.4, label=label)
         s0, n0 = totals(tasks)
         s1, n1 = totals(tasks, NEAREST_MEAN_KEY)
-        ax.set_title(f"{suite}: {_pct(s0, n0)} / {_pct(s1, n1)}")
+        ax.set_title(f"{suite}: plan from state 0 {_pct(s0, n0)} ({s0}/{n0}), from the nearest-mean state "
+                     f"{_pct(s1, n1)} ({s1}/{n1})", fontsize=10)
         ax.set_xticks(x, list(tasks))
+        ax.set_xlim(-0.6, max(len(tasks), 10) - 0.4)
         ax.set_ylim(0, 105)
         ax.set_ylabel("success (%)")
     axes[-1, 0].set_xlabel("task")
-    axes[0, 0].legend(loc="lower right", fontsize=8)
-    fig.suptitle("One demonstration replayed blind, per task")
-    fig.tight_layout()
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.suptitle("One demonstration replayed blind: success per task on the replay states")
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.955), ncol=2, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
     atomic_save_figure(fig, path, dpi=110)
     plt.close(fig)
 
