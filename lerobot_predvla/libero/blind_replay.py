@@ -16,7 +16,7 @@ Two plans per task, both chosen before any outcome is seen:
 
 Each plan is also replayed on its own source state: it must reproduce the expert's success there (a check that the
 replay is exact). Fixture poses (which resets jitter outside the simulator state) are drawn from numpy's generator
-seeded with `seed + state` before every reset, so an episode on a given state is the same whichever plan runs on it.
+seeded with `seed + state` before every reset, so a given state starts alike whichever plan runs on it.
 """
 
 import json
