@@ -21,13 +21,14 @@ import numpy as np
 import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
+from lerobot_predvla.columns import ACTION_DIM, HDF5_CAMERAS, LEROBOT_LIBERO_STATE_DIM
 from lerobot_predvla.data.dataset_conversion import convert_dataset
-from lerobot_predvla.frontend.dataset_fitting import FitDatasetFrontendConfig, fit_frontend_on_dataset
-from lerobot_predvla.frontend.lerobot_source import LeRobotSource
+from lerobot_predvla.data.dataset_fitting import FitDatasetFrontendConfig, fit_frontend_on_dataset
+from lerobot_predvla.data.lerobot_source import LeRobotSource
 from lerobot_predvla.frontend.vision import PRECISIONS, VisionWeights
 
-CAMERAS = ("observation.images.image", "observation.images.image2")  # LIBERO's community layout
-STATE_DIM, ACTION_DIM, FPS = 8, 7, 10
+CAMERAS = tuple(HDF5_CAMERAS)  # LIBERO's community layout: its two cameras, its 8-dim state
+STATE_DIM, FPS = LEROBOT_LIBERO_STATE_DIM, 10
 
 
 def make_video_dataset(root: Path, episodes: int, length: int, size: int = 128, seed: int = 0) -> Path:

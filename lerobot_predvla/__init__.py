@@ -4,9 +4,11 @@ Importing this package registers every policy type of the plugin with LeRobot (`
 `predvla_bc_transformer`, `predvla_bc_rnn`, `predvla_ladder`) and the `--env.type=predvla_libero` env; it is the
 only registration point (`lerobot_policy_predvla`, the name LeRobot's plugin loader imports, re-exports it). It also
 registers the `--robot.type=predvla_replay` robot and camera (a recorded episode played as a robot, docs/robot.md).
-Inside `lerobot-train` it makes checkpoints atomic and locks the output folder (utils/lerobot_train_hooks.py).
+Every change it makes to LeRobot beyond registering types (replaced functions, environment variables) is made by the
+one `install()` call below, and listed in lerobot_predvla/lerobot_integration.py and docs/lerobot_integration.md.
 """
 
+from lerobot_predvla import lerobot_integration
 from lerobot_predvla.envs.configs import PredVLALiberoEnv
 from lerobot_predvla.policies import POLICY_TYPES
 from lerobot_predvla.policies.bc_rnn.configuration_predvla_bc_rnn import PredVLABCRNNConfig
@@ -19,9 +21,8 @@ from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
 from lerobot_predvla.policies.predvla.processor_predvla import make_predvla_pre_post_processors
 from lerobot_predvla.robots import DatasetReplayRobotConfig
-from lerobot_predvla.utils.lerobot_train_hooks import install_lerobot_train_hooks
 
-install_lerobot_train_hooks()  # inside lerobot-train only: atomic checkpoints, one training per output folder
+lerobot_integration.install()
 
 __all__ = [
     "DatasetReplayRobotConfig",

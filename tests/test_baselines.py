@@ -20,10 +20,10 @@ from lerobot_predvla.policies.bc_transformer.modeling_predvla_bc_transformer imp
     PredVLABCTransformerConfig,
     PredVLABCTransformerPolicy,
 )
+from lerobot_predvla.policies.common.sequence_table import read_columns
 from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PredVLALadderConfig
 from lerobot_predvla.policies.ladder.modeling_predvla_ladder import PredVLALadderPolicy
 from lerobot_predvla.policies.predvla.corruption import replaced
-from lerobot_predvla.policies.predvla.sequence_table import read_columns
 from lerobot_predvla.utils.parameters import count_parameters
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "policy"

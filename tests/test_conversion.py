@@ -15,11 +15,11 @@ from libero_factory import RAW_TOP_ROWS, write_libero_file
 
 from lerobot_predvla.cli import convert as convert_cmd
 from lerobot_predvla.cli import fit_frontend as fit_frontend_cmd
+from lerobot_predvla.columns import HDF5_CAMERAS, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.data import conversion
-from lerobot_predvla.data.libero_hdf5 import scan_file
-from lerobot_predvla.frontend import CAMERAS, FrontendArtefact, FrozenFrontend, LiberoDataError
+from lerobot_predvla.data.libero_hdf5 import LiberoDataError, scan_file
+from lerobot_predvla.frontend import FrontendArtefact, FrozenFrontend
 from lerobot_predvla.frontend.preprocessing import libero_hdf5_to_lerobot
-from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
 SOUP = "pick up the alphabet soup and place it in the basket"
 MILK = "pick up the milk and place it in the basket"
@@ -87,11 +87,11 @@ def test_dataset_layout(png_dataset):
     assert meta.fps == 20 and meta.robot_type == "panda"
     assert meta.total_episodes == len(EPISODES) and meta.total_frames == sum(e[2] for e in EPISODES)
     assert meta.total_tasks == 2
-    shapes = {camera: (128, 128, 3) for camera in CAMERAS} | {
+    shapes = {camera: (128, 128, 3) for camera in HDF5_CAMERAS} | {
         "observation.state": (9,), "action": (7,), OBS_VISION_FEATURES: (192,), OBS_LANGUAGE_FEATURES: (64,)}
     for key, shape in shapes.items():
         assert tuple(meta.features[key]["shape"]) == shape
-        assert meta.features[key]["dtype"] == ("image" if key in CAMERAS else "float32")
+        assert meta.features[key]["dtype"] == ("image" if key in HDF5_CAMERAS else "float32")
     lengths = [n for _, _, n, _ in EPISODES]
     assert list(meta.episodes["length"]) == lengths
     assert list(meta.episodes["dataset_from_index"]) == list(np.cumsum([0, *lengths[:-1]]))
@@ -119,8 +119,8 @@ def test_frames_match_hdf5_and_front_end(png_dataset, libero, frontend):
                            torch.from_numpy(data["actions"].astype(np.float32)))
         # Images are stored rotated as LeRobot's LIBERO env delivers them (PNG is lossless).
         oriented = {cam: libero_hdf5_to_lerobot(data[key]) for cam, key in CAMERA_HDF5.items()}
-        stored = {cam: torch.stack([f[cam] for f in frames]) for cam in CAMERAS}
-        for cam in CAMERAS:
+        stored = {cam: torch.stack([f[cam] for f in frames]) for cam in HDF5_CAMERAS}
+        for cam in HDF5_CAMERAS:
             assert stored[cam].dtype == torch.float32
             assert torch.equal(stored[cam], torch.from_numpy(oriented[cam]).permute(0, 3, 1, 2).float() / 255)
         # Cached features equal a direct recomputation, from the hdf5 pixels and from the dataset images.
@@ -150,7 +150,7 @@ def test_simulator_route_gives_the_cached_features(png_dataset, libero, frontend
     for t in range(3):
         obs = preprocess_observation({"pixels": {k.split(".")[-1]: data[v][t] for k, v in CAMERA_HDF5.items()}})
         obs = LiberoProcessorStep().observation(obs)
-        live = frontend.encode_images({cam: obs[cam] for cam in CAMERAS})[0]
+        live = frontend.encode_images({cam: obs[cam] for cam in HDF5_CAMERAS})[0]
         cached = png_dataset[first + t][OBS_VISION_FEATURES]
         # Only the batch size differs (1 here, the whole episode when caching); measured 0 on x86 CPUs.
         assert (live - cached).norm() / cached.norm() < 5e-3
@@ -165,7 +165,7 @@ def test_video_storage(libero, frontend_dir, png_dataset, tmp_path):
     for i in (0, len(video) - 1):
         v, p = video[i], png_dataset[i]
         assert torch.equal(v[OBS_VISION_FEATURES], p[OBS_VISION_FEATURES])  # Computed from the hdf5 pixels.
-        for cam in CAMERAS:
+        for cam in HDF5_CAMERAS:
             assert v[cam].shape == (3, 128, 128) and (v[cam] - p[cam]).abs().mean() < 0.05  # Lossy AV1.
             red_band = v[cam][:, -RAW_TOP_ROWS + 1 :]  # The raw top band ends up at the bottom.
             assert red_band[0].mean() > 0.8 and red_band[1:].mean() < 0.2

@@ -19,7 +19,7 @@ from lerobot_predvla.experiments.headline import (
     RESULTS_DOC,
     update_docs,
 )
-from lerobot_predvla.hub.publish import shipped_checkpoints, without_machine_paths
+from lerobot_predvla.hub.upload import shipped_checkpoints, without_machine_paths
 from lerobot_predvla.utils.io import atomic_write_json
 
 REPO = Path(__file__).resolve().parents[1]
@@ -166,7 +166,7 @@ def test_shipped_checkpoint_processors_follow_the_policy(checkpoint):
     from lerobot.policies.factory import make_pre_post_processors
     from lerobot.processor import DeviceProcessorStep
 
-    from lerobot_predvla.hub.publish import FRONTEND_STEP, PREPROCESSOR_FILE
+    from lerobot_predvla.hub.card import FRONTEND_STEP, PREPROCESSOR_FILE
 
     path = REPO / "checkpoints" / checkpoint
     steps = json.loads((path / PREPROCESSOR_FILE).read_text())["steps"]
@@ -288,7 +288,7 @@ def test_shipped_configs_and_model_cards_are_as_published():
 
 
 def test_model_card_states_the_checkpoints_own_training_and_results():
-    from lerobot_predvla.hub.publish import evaluation_records
+    from lerobot_predvla.hub.card import evaluation_records
 
     checkpoint = REPO / "checkpoints/predvla_libero_object"
     card = (checkpoint / "README.md").read_text()
@@ -309,7 +309,7 @@ def test_model_card_states_the_checkpoints_own_training_and_results():
 def test_model_card_command_reproduces_its_results_and_limitations_state_them():
     """The card's `lerobot-eval` command runs the protocol of the results it shows (episodes per task, step cap), and
     its limitations give error regression against exact open loop and the BC baselines on the same data."""
-    from lerobot_predvla.hub.publish import evaluation_records
+    from lerobot_predvla.hub.card import evaluation_records
 
     checkpoint = REPO / "checkpoints/predvla_libero_object"
     card = (checkpoint / "README.md").read_text()

@@ -6,16 +6,15 @@ and framebuffers, all in process memory on a CPU) and rebuilds them at every har
 shared context draws the same pixels as robosuite's, and that a further environment costs far less memory.
 """
 
-
 import numpy as np
 import pytest
 
+from lerobot_predvla.columns import SIM_CAMERAS
 from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
 
 pytestmark = pytest.mark.simulator
 
 SUITE = "libero_object"
-CAMERAS = ("agentview", "robot0_eye_in_hand")
 
 
 def rss_gb() -> float:
@@ -46,7 +45,7 @@ def test_sub_environments_share_one_render_context_with_robosuites_pixels():
     for i, sub_env in enumerate(venv.envs):
         reference.set_init_state(sub_env._env.get_sim_state())
         sim = reference.env.sim
-        for camera, key in zip(CAMERAS, ("image", "image2"), strict=True):
+        for camera, key in zip(SIM_CAMERAS.values(), ("image", "image2"), strict=True):
             sim._render_context_offscreen.gl_ctx.make_current()
             expected = sim.render(camera_name=camera, width=128, height=128)[::flip]
             assert expected.std() > 0  # a real scene, not a blank buffer

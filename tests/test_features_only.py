@@ -15,7 +15,7 @@ from safetensors.torch import load_file
 from test_lerobot_dataset import MILK, SOUP, convert, fit
 
 from lerobot_predvla.cli.main import main as predvla
-from lerobot_predvla.policies.common.cached_features import FRONTEND_META_DIR
+from lerobot_predvla.columns import FRONTEND_META_DIR
 
 
 @pytest.fixture(scope="module")

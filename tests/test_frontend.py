@@ -13,8 +13,8 @@ from libero_factory import RAW_TOP_ROWS, raw_images, write_libero_file
 from safetensors.numpy import load_file
 
 from lerobot_predvla.cli import fit_frontend as fit_frontend_cmd
+from lerobot_predvla.columns import HDF5_CAMERAS
 from lerobot_predvla.frontend import (
-    CAMERAS,
     FrontendArtefact,
     FrontendArtefactError,
     FrozenFrontend,
@@ -121,7 +121,7 @@ def test_artefact_records_identities_and_variance(frontend_dir):
     assert meta["vision"]["weights"] == {"source": "random", "path": None, "seed": 7}
     assert "RANDOM" in meta["vision"]["weights_description"]
     assert meta["vision"]["precision"] == "fp32"
-    assert list(meta["vision"]["cameras"]) == list(CAMERAS)
+    assert list(meta["vision"]["cameras"]) == list(HDF5_CAMERAS)
     for info in meta["vision"]["cameras"].values():
         assert (info["input_dim"], info["n_components"], info["num_samples"]) == (512, 96, 30)
         assert info["components_with_variance"] <= 29  # 30 frames span at most 29 directions.
@@ -155,7 +155,7 @@ def test_identical_instructions_give_identical_features(frontend):
 
 
 def test_image_features_have_paper_dims(frontend):
-    images = {camera: libero_hdf5_to_lerobot(raw_images(3, seed=i)) for i, camera in enumerate(CAMERAS)}
+    images = {camera: libero_hdf5_to_lerobot(raw_images(3, seed=i)) for i, camera in enumerate(HDF5_CAMERAS)}
     features = frontend.encode_images(images)
     assert features.shape == (3, 192) and torch.isfinite(features).all()
     with pytest.raises(KeyError, match="observation.images.image2"):
@@ -208,7 +208,7 @@ def test_mismatching_weights_or_dims_are_rejected(frontend_dir, tmp_path):
     with pytest.raises(FrontendArtefactError, match="fitted with"):
         FrozenFrontend(artefact, verbose=False)
     with pytest.raises(FrontendArtefactError, match=r"language.n_components is 64, requested 32"):
-        artefact.check_dims(32, 96, list(CAMERAS), frontend_dir)
+        artefact.check_dims(32, 96, list(HDF5_CAMERAS), frontend_dir)
     with pytest.raises(FrontendArtefactError, match="missing"):
         FrontendArtefact.load(tmp_path)
 
@@ -243,7 +243,7 @@ def test_language_pca_on_the_libero_task_list_separates_one_task(libero_root, tm
 def test_an_enclosing_autocast_does_not_change_the_features(frontend):
     """lerobot-eval runs the preprocessor under autocast when the policy has `use_amp` (PredVLA trained with
     `--policy.use_amp=true`): the features must stay those the converter cached."""
-    images = {camera: libero_hdf5_to_lerobot(raw_images(2, seed=i)) for i, camera in enumerate(CAMERAS)}
+    images = {camera: libero_hdf5_to_lerobot(raw_images(2, seed=i)) for i, camera in enumerate(HDF5_CAMERAS)}
     expected = frontend.encode_images(images), frontend.encode_instructions(INSTRUCTIONS[:2])
     with torch.autocast("cpu", dtype=torch.bfloat16):
         got = frontend.encode_images(images), frontend.encode_instructions(INSTRUCTIONS[:2])

@@ -9,12 +9,12 @@ import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot_factory import LIBERO_COMMUNITY, make_dataset
 
+from lerobot_predvla.columns import OBS_VISION_FEATURES
 from lerobot_predvla.data.dataset_conversion import convert_dataset
+from lerobot_predvla.data.dataset_fitting import FitDatasetFrontendConfig, fit_frontend_on_dataset
+from lerobot_predvla.data.lerobot_source import LeRobotSource
 from lerobot_predvla.frontend import FrozenFrontend
-from lerobot_predvla.frontend.dataset_fitting import FitDatasetFrontendConfig, fit_frontend_on_dataset
-from lerobot_predvla.frontend.lerobot_source import LeRobotSource
 from lerobot_predvla.frontend.vision import VisionWeights
-from lerobot_predvla.policies.common.cached_features import OBS_VISION_FEATURES
 
 EPISODES = [("pick up the alphabet soup and place it in the basket", 7), ("pick up the milk", 6)]
 # Largest |difference| of a cached feature from the fp32 frame-by-frame reference (features are PCA scores of

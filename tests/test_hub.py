@@ -23,7 +23,7 @@ from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.pca import PCABasis
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import VisionWeights
-from lerobot_predvla.hub.publish import MINILM_PARAMS, RESNET18_BACKBONE_PARAMS
+from lerobot_predvla.hub.card import MINILM_PARAMS, RESNET18_BACKBONE_PARAMS
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 from lerobot_predvla.utils.checkpoints import last_pretrained
 from lerobot_predvla.utils.parameters import count_parameters
@@ -235,10 +235,28 @@ def test_push_refuses_another_plugins_checkpoint_in_one_line(tmp_path, capsys):
     assert err.count("\n") == 1 and "policy type 'act' is not one of this plugin's" in err
 
 
+def test_every_policy_type_has_its_own_card_section_and_an_unknown_type_is_an_error():
+    from lerobot_predvla.hub.card import MODEL_SECTIONS, HubError, _model_section
+    from lerobot_predvla.policies import POLICY_TYPES
+
+    assert set(MODEL_SECTIONS) == set(POLICY_TYPES)
+    with pytest.raises(HubError, match="'act' has no model card section"):
+        _model_section({"type": "act", "chunk_size": 100})
+
+
+def test_publishing_a_policy_loads_card_and_upload_code_only():
+    """What `PredVLAPolicy.push_to_hub` imports (hub/upload.py and hub/card.py) loads neither the experiment runners
+    nor the report."""
+    code = ("import sys, lerobot_predvla.hub.upload; "
+            "print(sorted(m for m in sys.modules if m.startswith('lerobot_predvla.experiments')))")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert result.stdout.strip() == "[]"
+
+
 def test_card_names_an_inference_override_that_config_json_predates():
     """An evaluation override of a field that an older `config.json` lacks is compared with the field's default
     (what that config loads as), so the card's records table names it instead of "as in config.json"."""
-    from lerobot_predvla.hub.publish import inference_settings
+    from lerobot_predvla.hub.card import inference_settings
 
     config = {"type": "predvla", "er_lr": 0.05, "er_iterations": 10}  # saved before er_adam_state existed
     record = {"commands": {"train": ["lerobot-train", "--policy.type=predvla"]}}

@@ -22,7 +22,7 @@ from lerobot_predvla.experiments.kill_resume import (
     run_harness,
     train_command,
 )
-from lerobot_predvla.hub.publish import push_checkpoint
+from lerobot_predvla.hub.upload import push_checkpoint
 from lerobot_predvla.utils.checkpoints import (
     kill_point,
     remove_leftovers,

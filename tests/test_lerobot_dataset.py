@@ -22,12 +22,8 @@ from lerobot.utils.constants import OBS_STATE
 from lerobot_factory import LIBERO_COMMUNITY, SO101, Layout, make_dataset
 from test_conversion import run_cli
 
+from lerobot_predvla.columns import FRONTEND_META_DIR, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.frontend import FrozenFrontend
-from lerobot_predvla.policies.common.cached_features import (
-    FRONTEND_META_DIR,
-    OBS_LANGUAGE_FEATURES,
-    OBS_VISION_FEATURES,
-)
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 
 BIN = Path(sys.executable).parent
@@ -323,7 +319,8 @@ def test_lerobot_eval_on_libero_with_lerobots_state(libero_layout, tmp_path):
 
 @pytest.mark.slow  # its fixture trains with lerobot-train
 def test_model_card_describes_the_robots_own_layout(so101_layout):
-    from lerobot_predvla.hub.publish import publishable_files, render_card
+    from lerobot_predvla.hub.card import render_card
+    from lerobot_predvla.hub.upload import publishable_files
 
     card = render_card(publishable_files(so101_layout["checkpoint"]), "me/predvla_so101", None)
     assert "| `observation.state` | (6,) | the training dataset's `observation.state` (state) |" in card

@@ -33,7 +33,7 @@ def libero():
 
 def test_expert_episode_to_hdf5(libero, tmp_path):
     env_mod, spec = libero
-    from lerobot_predvla.data.hdf5_layout import check_task_file, file_attrs, task_file, write_task_file
+    from lerobot_predvla.libero.hdf5_layout import check_task_file, file_attrs, task_file, write_task_file
     from lerobot_predvla.libero.render import replay_observations
     from lerobot_predvla.libero.rollout import run_episode
 
@@ -357,7 +357,7 @@ def test_demo_start_spread_reads_the_demonstrations_first_states(libero, tmp_pat
     """Demonstrations that start exactly at the official init states spread exactly as those do; a missing task file
     is named."""
     env_mod, spec = libero
-    from lerobot_predvla.data.hdf5_layout import task_file
+    from lerobot_predvla.libero.hdf5_layout import task_file
     from lerobot_predvla.libero.start_spread import demo_start_spread, main
 
     path = task_file(tmp_path, spec)

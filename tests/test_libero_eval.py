@@ -16,9 +16,9 @@ import torch
 from libero_factory import write_libero_file
 from test_conversion import SUITE, convert, run_cli
 
+from lerobot_predvla.columns import OBS_IMAGE_FRESH, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.frontend import FrontendArtefact, FrozenFrontend
-from lerobot_predvla.frontend.processor_step import OBS_IMAGE_FRESH, FrontendProcessorStep
-from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
 
 pytestmark = pytest.mark.simulator
 
@@ -201,7 +201,7 @@ def test_published_files_reproduce_actions_front_end_included(checkpoint, tmp_pa
     from lerobot.policies.factory import make_pre_post_processors
 
     from lerobot_predvla import PredVLAConfig, PredVLAPolicy
-    from lerobot_predvla.hub.publish import collect_checkpoint
+    from lerobot_predvla.hub.upload import collect_checkpoint
 
     files, _ = collect_checkpoint(checkpoint)
     assert any("predvla_frontend_processor" in name and name.endswith(".safetensors") for name in files)
@@ -231,8 +231,9 @@ def test_step_caps_are_lerobots():
     """The per-suite caps `predvla demos` and the docs use are the ones lerobot-eval applies."""
     from lerobot.envs.libero import TASK_SUITE_MAX_STEPS
 
+    from lerobot_predvla.columns import SUITES
     from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
-    from lerobot_predvla.libero.protocol import STEP_CAPS, SUITES
+    from lerobot_predvla.libero.protocol import STEP_CAPS
 
     assert set(STEP_CAPS) == set(SUITES)
     assert {suite: TASK_SUITE_MAX_STEPS[suite] for suite in SUITES} == STEP_CAPS

@@ -26,8 +26,8 @@ from test_lerobot_dataset import prepare
 from test_policy import randomised_policy, run, stream
 
 from lerobot_predvla import PredVLAConfig, PredVLAPolicy
+from lerobot_predvla.columns import OBS_VISION_FEATURES
 from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
-from lerobot_predvla.policies.common.cached_features import OBS_VISION_FEATURES
 from lerobot_predvla.policies.common.observation_guard import ObservationGuard
 from lerobot_predvla.robots.replay import as_camera_frame
 

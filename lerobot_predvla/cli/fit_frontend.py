@@ -5,11 +5,11 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
-from lerobot_predvla.frontend.dataset_fitting import FitDatasetFrontendConfig, fit_frontend_on_dataset
-from lerobot_predvla.frontend.fitting import FitFrontendConfig, fit_frontend, variance_summary
+from lerobot_predvla.columns import SUITES
+from lerobot_predvla.data.dataset_fitting import FitDatasetFrontendConfig, fit_frontend_on_dataset
+from lerobot_predvla.data.fitting import FitFrontendConfig, fit_frontend, variance_summary
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import PRECISIONS, VisionWeights, VisionWeightsError
-from lerobot_predvla.libero.protocol import SUITES
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 
 CONFIG_DEFAULTS = {f.name: f.default for f in fields(PredVLAConfig)}

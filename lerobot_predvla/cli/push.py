@@ -8,7 +8,9 @@ from pathlib import Path
 
 from huggingface_hub.errors import HfHubHTTPError, OfflineModeIsEnabled
 
-from lerobot_predvla.hub.publish import HubError, push_checkpoint
+from lerobot_predvla.experiments.report import SUMMARY_FILE, load_summary
+from lerobot_predvla.hub.card import HubError, report_results
+from lerobot_predvla.hub.upload import push_checkpoint
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -38,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         files, url = push_checkpoint(
             args.checkpoint, args.repo_id, private=args.private or None, frontend=args.frontend,
-            report=args.results, report_config=args.results_config, dry_run=args.dry_run or args.out is not None,
+            dry_run=args.dry_run or args.out is not None, **card_results(args.results, args.results_config),
         )
         if args.out is not None:
             write_snapshot(files, args.out)
@@ -53,6 +55,16 @@ def run(args: argparse.Namespace) -> int:
     where = f"published: {url}" if url else f"written to {args.out}" if args.out else "(dry run, nothing uploaded)"
     print(f"predvla push: {len(files)} files {where}")
     return 0
+
+
+def card_results(results: Path | None, config_name: str | None) -> dict:
+    """`--results` as `push_checkpoint` takes it: a results folder of run records (a folder without `report.json`),
+    or the table of a `predvla report` output (its directory or `report.json`)."""
+    if results is None:
+        return {}
+    if results.is_dir() and not (results / SUMMARY_FILE).is_file():
+        return {"results": results}
+    return {"report": report_results(load_summary(results), results, config_name)}
 
 
 def write_snapshot(files: dict[str, Path | bytes], out: Path) -> None:

@@ -16,14 +16,10 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.constants import ACTION, OBS_STATE
 from tqdm import tqdm
 
-from lerobot_predvla.data.libero_hdf5 import CAMERAS, DemoRef, read_demo, scan_suites
+from lerobot_predvla.columns import FRONTEND_META_DIR, HDF5_CAMERAS, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.data.libero_hdf5 import DemoRef, read_demo, scan_suites
 from lerobot_predvla.frontend.frozen import FrozenFrontend
 from lerobot_predvla.frontend.preprocessing import libero_hdf5_to_lerobot
-from lerobot_predvla.policies.common.cached_features import (
-    FRONTEND_META_DIR,
-    OBS_LANGUAGE_FEATURES,
-    OBS_VISION_FEATURES,
-)
 from lerobot_predvla.utils.finite import check_finite
 
 LIBERO_FPS = 20
@@ -54,7 +50,7 @@ def dataset_features(image_shapes: tuple, vision_dim: int, language_dim: int, im
     dtype = "video" if image_storage == "video" else "image"
     features = {
         camera: {"dtype": dtype, "shape": shape, "names": ["height", "width", "channels"]}
-        for camera, shape in zip(CAMERAS, image_shapes, strict=True)
+        for camera, shape in zip(HDF5_CAMERAS, image_shapes, strict=True)
     }
     features[OBS_STATE] = {"dtype": "float32", "shape": (len(STATE_NAMES),), "names": STATE_NAMES}
     features[ACTION] = {"dtype": "float32", "shape": (len(ACTION_NAMES),), "names": ACTION_NAMES}
@@ -126,7 +122,7 @@ def convert_suite(
         raise FileExistsError(f"{out} already exists; choose a new --out or remove it.")
     refs = scan_suites(hdf5_root, [suite])  # Validates every file before anything is written.
     frontend = FrozenFrontend.load(frontend_dir, batch_size=batch_size)
-    frontend.artefact.check_dims(language_dim, vision_dim_per_camera, list(CAMERAS), frontend_dir)
+    frontend.artefact.check_dims(language_dim, vision_dim_per_camera, list(HDF5_CAMERAS), frontend_dir)
 
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))

@@ -19,15 +19,11 @@ from lerobot.datasets.dataset_tools import add_features
 from lerobot.datasets.io_utils import load_stats, write_stats
 from tqdm import tqdm
 
+from lerobot_predvla.columns import FRONTEND_META_DIR, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.data.conversion import ConversionSummary
+from lerobot_predvla.data.lerobot_source import LeRobotSource
 from lerobot_predvla.frontend.artefact import FrontendArtefactError
 from lerobot_predvla.frontend.frozen import FrozenFrontend
-from lerobot_predvla.frontend.lerobot_source import LeRobotSource
-from lerobot_predvla.policies.common.cached_features import (
-    FRONTEND_META_DIR,
-    OBS_LANGUAGE_FEATURES,
-    OBS_VISION_FEATURES,
-)
 
 
 def encode_dataset(source: LeRobotSource, frontend: FrozenFrontend, batch_size: int) -> dict[str, np.ndarray]:

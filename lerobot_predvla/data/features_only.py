@@ -15,7 +15,7 @@ from pathlib import Path
 from lerobot.datasets.dataset_tools import remove_feature
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-from lerobot_predvla.policies.common.cached_features import FRONTEND_META_DIR, OBS_VISION_FEATURES
+from lerobot_predvla.columns import FRONTEND_META_DIR, OBS_VISION_FEATURES
 
 
 def features_only_copy(root: Path | str, out: Path | str, repo_id: str | None = None) -> LeRobotDataset:

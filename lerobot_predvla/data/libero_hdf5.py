@@ -13,12 +13,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from lerobot_predvla.columns import ACTION_DIM, GRIPPER_DIM, HDF5_CAMERAS, JOINT_DIM
 from lerobot_predvla.utils.finite import NonFiniteError, check_finite
 
-# LeRobot camera keys (as LeRobot's LIBERO env names them) -> hdf5 observation keys.
-CAMERAS = {"observation.images.image": "agentview_rgb", "observation.images.image2": "eye_in_hand_rgb"}
 JOINT_KEY, GRIPPER_KEY, ACTION_KEY = "obs/joint_states", "obs/gripper_states", "actions"
-JOINT_DIM, GRIPPER_DIM, ACTION_DIM = 7, 2, 7
 DEMO_FILE_SUFFIX = "_demo.hdf5"
 _DEMO_NAME = re.compile(r"demo_(\d+)")
 
@@ -39,7 +37,7 @@ class DemoRef:
     demo: str
     num_frames: int
     instruction: str
-    image_shapes: tuple[tuple[int, int, int], ...]  # Per camera, in `CAMERAS` order.
+    image_shapes: tuple[tuple[int, int, int], ...]  # Per camera, in `HDF5_CAMERAS` order.
 
 
 @dataclass
@@ -83,7 +81,7 @@ def _check_demo(path: Path, name: str, group: h5py.Group, instruction: str) -> D
     expected = {ACTION_KEY: (ACTION_DIM,), JOINT_KEY: (JOINT_DIM,), GRIPPER_KEY: (GRIPPER_DIM,)}
     lengths = {}
     image_shapes = []
-    for key in [ACTION_KEY, JOINT_KEY, GRIPPER_KEY, *(f"obs/{k}" for k in CAMERAS.values())]:
+    for key in [ACTION_KEY, JOINT_KEY, GRIPPER_KEY, *(f"obs/{k}" for k in HDF5_CAMERAS.values())]:
         if key not in group:
             raise LiberoDataError(path, "missing key", name, key)
         dataset = group[key]
@@ -139,7 +137,7 @@ def scan_suites(hdf5_root: Path | str, suites: list[str]) -> list[DemoRef]:
         if ref.image_shapes != first.image_shapes:
             raise LiberoDataError(
                 ref.file, f"image shapes {ref.image_shapes} differ from {first.image_shapes} in {first.file}",
-                ref.demo, "obs/" + CAMERAS["observation.images.image"],
+                ref.demo, "obs/" + HDF5_CAMERAS["observation.images.image"],
             )
     return refs
 
@@ -151,10 +149,10 @@ def read_demo(ref: DemoRef, frame_stride: int = 1) -> LiberoDemo:
         with h5py.File(ref.file, "r") as f:
             group = f["data"][ref.demo]
             arrays = {}
-            for key in [ACTION_KEY, JOINT_KEY, GRIPPER_KEY, *(f"obs/{k}" for k in CAMERAS.values())]:
+            for key in [ACTION_KEY, JOINT_KEY, GRIPPER_KEY, *(f"obs/{k}" for k in HDF5_CAMERAS.values())]:
                 arrays[key] = group[key][::frame_stride]
     except (OSError, RuntimeError, KeyError, ValueError) as err:
         raise LiberoDataError(ref.file, f"cannot read data ({err})", ref.demo, key) from err
     state = np.concatenate([arrays[JOINT_KEY], arrays[GRIPPER_KEY]], axis=1).astype(np.float32)
-    images = {camera: arrays[f"obs/{k}"] for camera, k in CAMERAS.items()}
+    images = {camera: arrays[f"obs/{k}"] for camera, k in HDF5_CAMERAS.items()}
     return LiberoDemo(ref, images, state, arrays[ACTION_KEY].astype(np.float32))

@@ -15,7 +15,7 @@ import numpy as np
 from lerobot.datasets import LeRobotDataset
 from tqdm import tqdm
 
-from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.columns import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
 FPS = 20
 

@@ -13,8 +13,8 @@ vectorisation, and changes three things:
   steps in between repeat the last images and say so in `observation.image_fresh`.
 
 LeRobot's own `--env.type=libero` works too: LeRobot 0.6.1 chooses env processors by policy config in
-`make_env_pre_post_processors` (it special-cases X-VLA there) and offers plugins no hook, so importing this
-module wraps that function the same way for this plugin's policies. With the `libero` env type, the choice
+`make_env_pre_post_processors` (it special-cases X-VLA there) and offers plugins no hook, so the plugin wraps that
+function the same way for its policies (lerobot_predvla/lerobot_integration.py). With the `libero` env type, the choice
 follows the state the policy was trained on: a 9-dim state (joints + gripper, LIBERO's hdf5 demonstrations
 through `predvla convert --hdf5-root`) gets `PredVLALiberoProcessorStep` instead of LeRobot's
 `LiberoProcessorStep`; an 8-dim state (LeRobot's community LIBERO datasets through `predvla convert
@@ -23,29 +23,24 @@ processors unchanged. The other two changes above are not available there (every
 rendered, at 360 px unless `--env.observation_height/width=128`), so `predvla_libero` stays the default.
 
 With `predvla_libero`, a fault in one sub-environment ends only that episode, as a failure (`predvla_libero`), and
-`--env.fault_rate` injects sensor faults (`fault_injection`). Importing this module also wraps LeRobot's
-`eval_policy_all` so that `eval_info.json` gets a `predvla_faults` section: faulted episodes with their
-reasons, non-finite actions received by the environments, observations the policy masked, actions it
-replaced, and the injected faults.
+`--env.fault_rate` injects sensor faults (`fault_injection`). The plugin also wraps LeRobot's `eval_policy_all`
+(lerobot_predvla/lerobot_integration.py) so that `eval_info.json` gets a `predvla_faults` section (`fault_summary`):
+faulted episodes with their reasons, non-finite actions received by the environments, observations the policy
+masked, actions it replaced, and the injected faults.
 """
 
-import sys
 from dataclasses import dataclass
 
-import lerobot.envs.factory
 import torch
 from lerobot.configs.types import FeatureType, PipelineFeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig, LiberoEnv, _make_vec_env_cls
 from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline, ProcessorStepRegistry
-from lerobot.scripts import lerobot_eval
 from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 
+from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM
 from lerobot_predvla.envs.fault_injection import FaultInjectionStep
 from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
-from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
 
-JOINT_DIM, GRIPPER_DIM = 7, 2
-LEROBOT_LIBERO_STATE_DIM = 8  # LeRobot's LiberoProcessorStep: eef position 3 + axis-angle 3 + gripper 2
 OBS_ROBOT_STATE = "observation.robot_state"
 
 
@@ -138,29 +133,6 @@ def libero_env_processors(
     return PolicyProcessorPipeline(steps=steps), PolicyProcessorPipeline(steps=[])
 
 
-_lerobot_make_env_pre_post_processors = lerobot.envs.factory.make_env_pre_post_processors
-
-
-def make_env_pre_post_processors(env_cfg: EnvConfig, policy_cfg) -> tuple:
-    """LeRobot's `make_env_pre_post_processors`, with PredVLA's LIBERO step for this plugin's policies."""
-    ours = isinstance(policy_cfg, CachedFeaturesConfig)
-    if isinstance(env_cfg, PredVLALiberoEnv) and ours and policy_cfg.proprio_dim != JOINT_DIM + GRIPPER_DIM:
-        raise ValueError(
-            f"--env.type={EVAL_ENV_TYPE} gives a joints + gripper state ({JOINT_DIM + GRIPPER_DIM}); this policy was "
-            f"trained on a {policy_cfg.proprio_dim}-dim observation.state: evaluate it with --env.type=libero."
-        )
-    if type(env_cfg) is LiberoEnv and ours:
-        if policy_cfg.proprio_dim == JOINT_DIM + GRIPPER_DIM:
-            return libero_env_processors()
-        if policy_cfg.proprio_dim != LEROBOT_LIBERO_STATE_DIM:
-            raise ValueError(
-                f"This policy was trained on a {policy_cfg.proprio_dim}-dim observation.state; LIBERO offers joints + "
-                f"gripper ({JOINT_DIM + GRIPPER_DIM}, LIBERO's hdf5 demonstrations) or LeRobot's end-effector state "
-                f"({LEROBOT_LIBERO_STATE_DIM}, the community LeRobot datasets)."
-            )
-    return _lerobot_make_env_pre_post_processors(env_cfg, policy_cfg)
-
-
 def fault_summary(envs: dict, policy, env_preprocessor) -> dict:
     """The `predvla_faults` section of eval_info.json (see the module docstring)."""
     faulted, nonfinite_actions = [], 0
@@ -182,23 +154,3 @@ def fault_summary(envs: dict, policy, env_preprocessor) -> dict:
     if injection is not None:
         summary["injected"] = {**injection.get_config(), **injection.counts}
     return summary
-
-
-_lerobot_eval_policy_all = lerobot_eval.eval_policy_all
-
-
-def eval_policy_all(envs: dict, policy, env_preprocessor, *args, **kwargs) -> dict:
-    """LeRobot's `eval_policy_all`, plus the `predvla_faults` section (written into eval_info.json)."""
-    info = _lerobot_eval_policy_all(envs, policy, env_preprocessor, *args, **kwargs)
-    info["predvla_faults"] = fault_summary(envs, policy, env_preprocessor)
-    return info
-
-
-lerobot_eval.eval_policy_all = eval_policy_all
-
-# The modules that bind LeRobot's function by name: the factory, its package, and the CLI scripts (loaded
-# before plugins when run as `lerobot-eval` / `lerobot-train`; imported later, they take it from the package).
-for _name in ("lerobot.envs.factory", "lerobot.envs", "lerobot.scripts.lerobot_eval", "lerobot.scripts.lerobot_train"):
-    _module = sys.modules.get(_name)
-    if getattr(_module, "make_env_pre_post_processors", None) is _lerobot_make_env_pre_post_processors:
-        _module.make_env_pre_post_processors = make_env_pre_post_processors

@@ -21,11 +21,11 @@ import torch
 from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
 
-from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.columns import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.policies.common.sequence_table import EpisodeSequences
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
-from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import binomtest
 
+from lerobot_predvla.columns import SUITES
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
 from lerobot_predvla.experiments.logs import TrainingRun, training_runs
 from lerobot_predvla.experiments.lr_selection import (
@@ -37,7 +38,7 @@ from lerobot_predvla.experiments.lr_selection import (
     pending_selections,
 )
 from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE, eval_run_dir, run_log_path
-from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS, SUITES
+from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 

@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
+from lerobot_predvla.columns import SUITES
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
 from lerobot_predvla.experiments.logs import compact_log
 from lerobot_predvla.experiments.lr_selection import (
@@ -42,7 +43,8 @@ from lerobot_predvla.experiments.lr_selection import (
     selection_path,
 )
 from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
-from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK
+from lerobot_predvla.policies.recipe import NOT_RECIPE
 from lerobot_predvla.utils.checkpoints import last_pretrained, prune_checkpoints
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.manifest import sha256_file
@@ -57,8 +59,6 @@ GROUPS = ("main", "baseline", "ladder", "ablation", "corruption")
 CORRUPTION_SOURCE = {"libero_spatial": "libero_goal", "libero_goal": "libero_object",
                      "libero_object": "libero_spatial", "libero_10": "libero_spatial"}
 CORRUPTION_KEYS = {"channel", "alpha", "source_suite", "episode", "open_loop"}
-# Policy fields that say where or how fast a run computes, not what it computes.
-NOT_RECIPE = frozenset({"type", "push_to_hub", "device", "recurrence_backend", "use_amp", "repo_id"})
 TRAIN_DONE_FILE = "predvla_sweep_train.json"  # written beside a finished training's checkpoints
 EVAL_WALL_FILE = "predvla_sweep_eval.json"  # wall time of one evaluation part, beside its eval_info.json
 
@@ -683,8 +683,8 @@ class Runner:
 
     @staticmethod
     def missing_demo_tasks(suite: str, spec: DataSpec, hdf5: Path) -> list[int]:
-        from lerobot_predvla.data.hdf5_layout import task_file
         from lerobot_predvla.libero.env import num_tasks, task_spec
+        from lerobot_predvla.libero.hdf5_layout import task_file
 
         tasks = spec.tasks if spec.tasks is not None else range(num_tasks(suite))
         return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]

@@ -10,13 +10,11 @@ from lerobot.lerobot_types import EnvTransition, TransitionKey
 from lerobot.processor import ProcessorStep, ProcessorStepRegistry
 from lerobot.utils.constants import OBS_IMAGES
 
+from lerobot_predvla.columns import OBS_IMAGE_FRESH, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.frontend.artefact import FrontendArtefact, FrontendArtefactError
 from lerobot_predvla.frontend.frozen import FrozenFrontend
-from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.utils.threads import acting_threads
 
-# Set by the `predvla_libero` environment: 1 where the step's camera images are freshly rendered.
-OBS_IMAGE_FRESH = "observation.image_fresh"
 CAMERA_PREFIX = f"{OBS_IMAGES}."
 
 

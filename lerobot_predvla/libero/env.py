@@ -10,12 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_predvla.columns import SIM_CAMERAS, SUITES
 from lerobot_predvla.libero.config_path import active_config
-from lerobot_predvla.libero.protocol import SUITES
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-CAMERAS = ("agentview", "robot0_eye_in_hand")
 IMAGE_SIZE = 128
 # robosuite's default initialization noise (std, rad, per arm joint): the official init states of the benchmark
 # start the arm with it (their joint angles spread by 0.017-0.022 rad on libero_object), LIBERO's ControlEnv with none.
@@ -108,7 +107,7 @@ def env_kwargs(spec: TaskSpec, render: bool, init_noise: float = 0.0) -> dict:
         "has_offscreen_renderer": render,
         "use_camera_obs": render,
         "ignore_done": True,
-        "camera_names": list(CAMERAS),
+        "camera_names": list(SIM_CAMERAS.values()),
         "camera_heights": IMAGE_SIZE,
         "camera_widths": IMAGE_SIZE,
         "camera_depths": False,

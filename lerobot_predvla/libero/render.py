@@ -2,13 +2,14 @@
 
 import numpy as np
 
-from lerobot_predvla.libero.env import CAMERAS, set_fixture_poses
+from lerobot_predvla.columns import SIM_CAMERAS
+from lerobot_predvla.libero.env import set_fixture_poses
 from lerobot_predvla.libero.rollout import Episode
 
 
 def set_cameras_enabled(render_env, enabled: bool) -> None:
     """Switch the camera observables (the renders) of a camera env on or off."""
-    for camera in CAMERAS:
+    for camera in SIM_CAMERAS.values():
         render_env.env.modify_observable(f"{camera}_image", "enabled", enabled)
 
 

@@ -7,8 +7,8 @@ import time
 
 import numpy as np
 
+from lerobot_predvla.columns import SUITES
 from lerobot_predvla.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
-from lerobot_predvla.libero.protocol import SUITES
 
 
 def main(argv: list[str] | None = None) -> int:

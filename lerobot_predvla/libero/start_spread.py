@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_predvla.columns import SUITES
 from lerobot_predvla.libero.env import make_env, official_init_states, random_reset, task_spec
-from lerobot_predvla.libero.protocol import SUITES
 
 RESET_SEED = 1000  # randomised resets start from this seed, away from the demonstrations' (`predvla demos`)
 
@@ -65,7 +65,7 @@ def demo_start_spread(hdf5_root: Path, suite: str, task_id: int) -> dict[str, di
     the task's official init states, as `start_spread` measures them ("demonstrations", "official")."""
     import h5py
 
-    from lerobot_predvla.data.hdf5_layout import task_file
+    from lerobot_predvla.libero.hdf5_layout import task_file
 
     spec = task_spec(suite, task_id)
     path = task_file(hdf5_root, spec)

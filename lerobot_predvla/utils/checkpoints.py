@@ -3,7 +3,7 @@
 LeRobot 0.6.1 writes a step's files in place and replaces `checkpoints/last` by unlinking it and creating a
 new link, so a kill during the write leaves a half-written step folder and a kill between the two link calls
 leaves no `last` to resume from. `save_checkpoint_atomically` and `update_last_checkpoint_atomically` (put in
-their place inside `lerobot-train` by `lerobot_predvla.utils.lerobot_train_hooks`) make both atomic:
+their place inside `lerobot-train` by `lerobot_predvla.lerobot_integration`) make both atomic:
 
 - the step folder is written whole under a hidden name (`checkpoints/.000004.partial`), with a SHA-256
   manifest in `pretrained_model/` and in `training_state/` (utils/manifest.py), its files flushed to disk,

@@ -14,10 +14,8 @@ from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
 from lerobot.optim.optimizers import AdamConfig
 from lerobot.utils.constants import ACTION, OBS_STATE
 
-# Cached front-end columns written by the converter (`predvla convert`).
-OBS_VISION_FEATURES = "observation.vision_features"
-OBS_LANGUAGE_FEATURES = "observation.language_features"
-FRONTEND_META_DIR = "meta/predvla_frontend"  # the front-end artefact copy a converted dataset carries
+from lerobot_predvla.columns import FRONTEND_META_DIR, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+
 # The sizes a policy takes from its dataset's features; Table 1's defaults are LIBERO's Panda.
 LAYOUT_FIELDS = ("num_cameras", "proprio_dim", "action_dim", "vision_dim_per_camera", "language_dim")
 BAD_OBSERVATION_MODES = ("mask", "raise")  # acting on a missing or non-finite observation channel
@@ -158,7 +156,7 @@ class CachedFeaturesConfig(PreTrainedConfig):
 
     @property
     def observation_delta_indices(self) -> None:
-        # Sequences are assembled from an in-memory table keyed by episode (policies/predvla/sequence_table.py).
+        # Sequences are assembled from an in-memory table keyed by episode (policies/common/sequence_table.py).
         return None
 
     @property

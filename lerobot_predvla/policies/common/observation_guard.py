@@ -22,7 +22,7 @@ import torch
 from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
 
-from .cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.columns import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
 FALLBACK = "fallback_actions"  # count of non-finite actions replaced by `safe_action`
 REPORT_INTERVAL_S = 10.0  # longest time between two log lines while observations are being masked

@@ -22,8 +22,8 @@ from lerobot_predvla.policies.common.cached_features import (
     use_dataset_frontend,
 )
 from lerobot_predvla.policies.common.observation_guard import ObservationGuard
+from lerobot_predvla.policies.common.sequence_table import EpisodeSequences
 from lerobot_predvla.policies.common.training_guard import TrainingGuard
-from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
 from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
 from lerobot_predvla.utils.threads import acting_threads

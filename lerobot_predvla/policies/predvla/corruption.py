@@ -15,9 +15,9 @@ from lerobot.configs.types import NormalizationMode
 from lerobot.utils.constants import OBS_STATE
 from torch import Tensor
 
-from lerobot_predvla.policies.common.cached_features import OBS_VISION_FEATURES
+from lerobot_predvla.columns import OBS_VISION_FEATURES
+from lerobot_predvla.policies.common.sequence_table import read_columns
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
-from lerobot_predvla.policies.predvla.sequence_table import read_columns
 
 CHANNEL_KEYS = {"vision": OBS_VISION_FEATURES, "proprio": OBS_STATE}
 

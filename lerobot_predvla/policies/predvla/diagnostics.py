@@ -28,13 +28,13 @@ from lerobot.utils.constants import ACTION, OPTIMIZER_STATE, TRAINING_STATE_DIR
 from safetensors.torch import load_file
 from torch import Tensor
 
+from lerobot_predvla.policies.common.sequence_table import EpisodeSequences, read_columns
 from lerobot_predvla.utils.io import atomic_write_json
 
 from .configuration_predvla import ER_ADAM_STATES, MODULE_NAMES
 from .error_regression import ErrorRegression
 from .modeling_predvla import PredVLAPolicy, refresh_mask, term_weights, training_terms
 from .posterior_store import POSTERIOR_STORE_FILE
-from .sequence_table import EpisodeSequences, read_columns
 
 
 @dataclass

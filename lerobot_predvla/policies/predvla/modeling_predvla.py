@@ -16,6 +16,7 @@ from lerobot_predvla.policies.common.cached_features import (
     use_dataset_frontend,
 )
 from lerobot_predvla.policies.common.observation_guard import REPORT_INTERVAL_S, ObservationGuard
+from lerobot_predvla.policies.common.sequence_table import EpisodeSequences
 from lerobot_predvla.policies.common.training_guard import TrainingGuard
 from lerobot_predvla.policies.predvla.configuration_predvla import PREDVLA_PAPER_PARAMETERS, PredVLAConfig
 from lerobot_predvla.policies.predvla.corruption import ObservationCorruption
@@ -23,7 +24,6 @@ from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
 from lerobot_predvla.policies.predvla.recurrence_cpp import auto_uses_cpp
-from lerobot_predvla.policies.predvla.sequence_table import EpisodeSequences
 from lerobot_predvla.utils.checkpoints import kill_point
 from lerobot_predvla.utils.manifest import verify_manifests
 from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
@@ -158,7 +158,7 @@ class PredVLAPolicy(PreTrainedPolicy):
         (`hub/predvla_card.md`), never the training posteriors. LeRobot pushes the processors afterwards."""
         if peft_model is not None:
             raise NotImplementedError("PredVLA is trained in full; --policy.use_peft is not supported.")
-        from lerobot_predvla.hub.publish import push_policy
+        from lerobot_predvla.hub.upload import push_policy
 
         return self._without_posteriors(
             push_policy, self, self.config.repo_id, cfg=cfg, state_dict=state_dict, dataset_meta=dataset_meta,
@@ -169,7 +169,7 @@ class PredVLAPolicy(PreTrainedPolicy):
         """Publish this policy (network, config, PredVLA card; no posteriors) to `repo_id`."""
         if card_kwargs:
             raise ValueError("PredVLA's model card is rendered from hub/predvla_card.md; card_kwargs are not used.")
-        from lerobot_predvla.hub.publish import push_policy
+        from lerobot_predvla.hub.upload import push_policy
 
         return self._without_posteriors(push_policy, self, repo_id, private=private)
 
@@ -179,7 +179,8 @@ class PredVLAPolicy(PreTrainedPolicy):
         """PredVLA's card (`hub/predvla_card.md`) instead of LeRobot's generic one (same signature)."""
         from huggingface_hub import ModelCard
 
-        from lerobot_predvla.hub.publish import DatasetSummary, publishable_files, render_card, without_machine_paths
+        from lerobot_predvla.hub.card import DatasetSummary, render_card
+        from lerobot_predvla.hub.upload import publishable_files, without_machine_paths
 
         with tempfile.TemporaryDirectory() as tmp:
             self._without_posteriors(self.save_pretrained, Path(tmp))

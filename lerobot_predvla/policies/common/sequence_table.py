@@ -20,8 +20,8 @@ from lerobot.processor.converters import batch_to_transition, transition_to_batc
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor
 
-from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
-from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.columns import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
 
 SEQUENCE_COLUMNS = (OBS_VISION_FEATURES, OBS_STATE, ACTION)
 
@@ -56,7 +56,7 @@ class EpisodeSequences:
     length: Tensor  # valid steps per episode, at most L
 
     @classmethod
-    def from_dataset(cls, root: Path, config: PredVLAConfig, stats: dict | None) -> "EpisodeSequences":
+    def from_dataset(cls, root: Path, config: CachedFeaturesConfig, stats: dict | None) -> "EpisodeSequences":
         columns = read_columns(root, ["episode_index", "frame_index", *SEQUENCE_COLUMNS, OBS_LANGUAGE_FEATURES])
         normalised = normalise(config, stats, {k: torch.from_numpy(columns[k]) for k in
                                                (*SEQUENCE_COLUMNS, OBS_LANGUAGE_FEATURES)})
@@ -99,7 +99,7 @@ class EpisodeSequences:
         }
 
 
-def normalise(config: PredVLAConfig, stats: dict | None, columns: dict[str, Tensor]) -> dict[str, Tensor]:
+def normalise(config: CachedFeaturesConfig, stats: dict | None, columns: dict[str, Tensor]) -> dict[str, Tensor]:
     """Apply exactly the normalisation of the policy's preprocessor (LeRobot's NormalizerProcessorStep)."""
     features = {k: PolicyFeature(type=FeatureType.STATE, shape=(v.shape[-1],)) for k, v in columns.items()
                 if k != ACTION}

@@ -12,10 +12,10 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from lerobot_predvla.data.fitting import FRONTEND_DISTRIBUTIONS
+from lerobot_predvla.data.lerobot_source import SOURCE_ORIENTATION, LeRobotSource
 from lerobot_predvla.frontend.artefact import FrontendArtefact
-from lerobot_predvla.frontend.fitting import FRONTEND_DISTRIBUTIONS
 from lerobot_predvla.frontend.language import LanguageEncoder
-from lerobot_predvla.frontend.lerobot_source import SOURCE_ORIENTATION, LeRobotSource
 from lerobot_predvla.frontend.pca import fit_pca
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec, preprocess_images
 from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights

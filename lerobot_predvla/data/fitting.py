@@ -8,13 +8,13 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_predvla.data.libero_hdf5 import CAMERAS, read_demo, scan_suites
+from lerobot_predvla.columns import HDF5_CAMERAS, SUITES
+from lerobot_predvla.data.libero_hdf5 import read_demo, scan_suites
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.language import LanguageEncoder
 from lerobot_predvla.frontend.pca import fit_pca
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec, libero_hdf5_to_lerobot, preprocess_images
 from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
-from lerobot_predvla.libero.protocol import SUITES
 from lerobot_predvla.utils.versions import package_versions
 
 # The libraries that determine the features, recorded with every fit.
@@ -64,7 +64,7 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
     vision = VisionEncoder(cfg.vision_weights, cfg.precision, batch_size=cfg.batch_size)
     language = LanguageEncoder()
 
-    features: dict[str, list[torch.Tensor]] = {camera: [] for camera in CAMERAS}
+    features: dict[str, list[torch.Tensor]] = {camera: [] for camera in HDF5_CAMERAS}
     total = sum(len(range(0, ref.num_frames, cfg.frame_stride)) for ref in refs)
     with tqdm(total=total, desc="encoding frames", unit="frame") as progress:
         for ref in refs:

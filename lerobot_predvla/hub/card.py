@@ -1,42 +1,29 @@
-"""Publishing PredVLA checkpoints on the Hugging Face Hub with the model card of `hub/predvla_card.md`.
+"""The model card of a published policy (`hub/predvla_card.md` filled in): what the policy is, its inputs and
+outputs, front end, training data, configuration, evaluation command and results.
 
-Two routes end in `upload_files` (one `HfApi.create_commit`):
-- `lerobot-train ... --policy.push_to_hub=true --policy.repo_id=...`: `PredVLAPolicy.push_model_to_hub` calls
-  `push_trained_policy` at the end of training (LeRobot then pushes the processors in their own commits);
-- `predvla push CHECKPOINT_DIR REPO_ID`: `push_checkpoint` publishes a saved checkpoint in one commit.
-
-What is published: `config.json`, `model.safetensors`, `train_config.json`, the processors
-(`policy_preprocessor*.json/.safetensors`, `policy_postprocessor*`, which carry the front-end artefact), the
-artefact itself as `predvla_frontend/` when available, `README.md` (the card) and `sha256_manifest.json` (the
-SHA-256 of every file of the commit, verified on loading). Never the training
-posteriors (`posterior_store.safetensors`) nor `training_state/` (optimizer, scheduler, RNG).
+Each policy type of the plugin supplies its own section (`MODEL_SECTIONS`); a type without one is an error. The results
+come from the checkpoint's evaluation records (`evaluation_records`: the run records of `predvla sweep`) or from a
+`predvla report` table (`report_results`). Nothing here uploads (hub/upload.py does).
 """
 
 import dataclasses
-import importlib.metadata
 import importlib.resources
 import json
 import re
-import shutil
-import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
-from fnmatch import fnmatch
 from pathlib import Path
 from string import Template
 
-from huggingface_hub import CommitOperationAdd, HfApi
 from lerobot.configs import PreTrainedConfig
 from lerobot.utils.constants import POLICY_PREPROCESSOR_DEFAULT_NAME
 
-from lerobot_predvla.experiments.report import SUMMARY_FILE, load_summary
-from lerobot_predvla.frontend.artefact import METADATA_FILE, TENSORS_FILE
-from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, SUITES
+from lerobot_predvla.columns import SUITES
+from lerobot_predvla.frontend.artefact import METADATA_FILE
+from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, PAPER_OBJECT
 from lerobot_predvla.policies import POLICY_TYPES
-from lerobot_predvla.policies.common.cached_features import FRONTEND_META_DIR
 from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PREDICTIVE_RUNGS
-from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
-from lerobot_predvla.utils.checkpoints import REQUIRED_FILES, find_pretrained
-from lerobot_predvla.utils.manifest import MANIFEST_FILE, manifest_text
+from lerobot_predvla.policies.recipe import NOT_RECIPE, config_defaults, config_departures, differs
 from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.versions import package_version
 
@@ -44,10 +31,6 @@ from lerobot_predvla.utils.versions import package_version
 CARD_TEMPLATE = importlib.resources.files("lerobot_predvla.hub") / "predvla_card.md"
 CARD_FILE = "README.md"
 FRONTEND_DIR = "predvla_frontend"  # the artefact's folder inside a checkpoint and a Hub repo
-PUSH_PATTERNS = ("*.safetensors", "*.json", "*.yaml", "*.md")  # what LeRobot's own push uploads
-# A saved folder's manifest lists that folder (posterior store included); each publishing route writes the manifest
-# of what it publishes instead.
-NEVER_PUSHED = (POSTERIOR_STORE_FILE, MANIFEST_FILE)
 TAGS = ("robotics", "lerobot", "predvla", "libero")
 PREDICTIVE_TAG = "predictive-coding"  # PredVLA and the ladder rungs that keep its predictive network
 # Frozen encoders (counted once: torchvision resnet18 without `fc`; sentence-transformers all-MiniLM-L6-v2).
@@ -55,7 +38,6 @@ RESNET18_BACKBONE_PARAMS = 11_176_512
 MINILM_PARAMS = 22_713_216
 FRONTEND_STEP = "predvla_frontend_processor"
 PREPROCESSOR_FILE = f"{POLICY_PREPROCESSOR_DEFAULT_NAME}.json"
-MACHINE_FIELDS = ("frontend_dir", "device")  # policy config fields that name the training machine's resources
 # Config fields that hold the paper's training length and batch, not this run's (the card's Training data has those).
 PAPER_ONLY_FIELDS = ("train_steps", "train_batch_size")
 PAPER_ONLY_NOTE = " (the paper's value; this run's: Training data)"
@@ -83,45 +65,6 @@ class HubError(ValueError):
     """A checkpoint or input that cannot be published as asked."""
 
 
-# ----- files ---------------------------------------------------------------------------------------------
-def pretrained_dir(checkpoint: Path) -> Path:
-    """The `pretrained_model` directory of a checkpoint (or the directory itself when it holds the weights)."""
-    found = find_pretrained(checkpoint)
-    if found is not None:
-        return found
-    raise HubError(
-        f"{checkpoint}: not a checkpoint; expected {' and '.join(REQUIRED_FILES)} in it or in its "
-        "pretrained_model/ (e.g. outputs/RUN/checkpoints/last)."
-    )
-
-
-def publishable_files(directory: Path) -> dict[str, Path]:
-    """Files of a saved policy that go to the Hub, keyed by their path in the repository."""
-    files = {}
-    for path in sorted(Path(directory).rglob("*")):
-        rel = path.relative_to(directory).as_posix()
-        if (
-            path.is_file()
-            and any(fnmatch(path.name, pattern) for pattern in PUSH_PATTERNS)
-            and path.name not in NEVER_PUSHED
-            and not any(part.startswith(".") for part in Path(rel).parts)  # temporary files of atomic writes
-            and not rel.startswith("training_state/")
-        ):
-            files[rel] = path
-    return files
-
-
-def frontend_source(pretrained: Path, dataset_root: Path | None, override: Path | None) -> Path | None:
-    """The artefact directory to publish: `override`, the checkpoint's own copy, or the dataset's copy."""
-    if override is not None:
-        if not (override / METADATA_FILE).is_file() or not (override / TENSORS_FILE).is_file():
-            raise HubError(f"--frontend {override}: expected {METADATA_FILE} and {TENSORS_FILE} in it.")
-        return override
-    for candidate in (pretrained / FRONTEND_DIR, dataset_root / FRONTEND_META_DIR if dataset_root else None):
-        if candidate is not None and (candidate / METADATA_FILE).is_file() and (candidate / TENSORS_FILE).is_file():
-            return candidate
-    return None
-
 
 def read_json(files: dict[str, Path | bytes], name: str) -> dict:
     """A JSON file about to be published, from its path or from the bytes that replace it."""
@@ -129,40 +72,6 @@ def read_json(files: dict[str, Path | bytes], name: str) -> dict:
     return json.loads(source if isinstance(source, bytes) else source.read_text())
 
 
-def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
-    """The files as every route publishes them: the training machine's paths and device cleared from the configs.
-
-    `frontend_dir` (the artefact is published beside the weights and inside the preprocessor), the dataset root and
-    the output directory name places on the training machine only; loading ignores them once they are None. The
-    device is the training machine's too. LeRobot keeps a stored device that is available and picks the best
-    available one when it is None: `config.json`'s when loading the policy (`--policy.path`, `from_pretrained`), and
-    `train_config.json`'s policy device when training from it (`lerobot-train --config_path=...`, `--resume`). Both
-    are cleared. The processors keep theirs: a device step needs a device (None fails to load); `lerobot-eval`,
-    `lerobot-rollout`, `lerobot-train` and LeRobot's policy server replace the preprocessor's with the policy's, and
-    the postprocessor's `cpu` is where actions go (the environment or robot), not where the policy trained. The
-    front-end step's `device` of older checkpoints is ignored when loading (the encoders follow the images) and
-    dropped.
-    """
-    published: dict[str, Path | bytes] = dict(files)
-    if "config.json" in files:
-        config = read_json(files, "config.json")
-        published["config.json"] = json.dumps(
-            {**config, **{k: None for k in MACHINE_FIELDS if k in config}}, indent=4).encode()
-    if "train_config.json" in files:
-        train_cfg = read_json(files, "train_config.json")
-        train_cfg["output_dir"] = None
-        if isinstance(train_cfg.get("dataset"), dict):
-            train_cfg["dataset"]["root"] = None
-        if isinstance(train_cfg.get("policy"), dict):
-            train_cfg["policy"].update({k: None for k in MACHINE_FIELDS if k in train_cfg["policy"]})
-        published["train_config.json"] = json.dumps(train_cfg, indent=4).encode()
-    if PREPROCESSOR_FILE in files:
-        preprocessor = read_json(files, PREPROCESSOR_FILE)
-        for step in preprocessor.get("steps", []):
-            if step.get("registry_name") == FRONTEND_STEP:
-                step.get("config", {}).pop("device", None)
-        published[PREPROCESSOR_FILE] = json.dumps(preprocessor, indent=2).encode()  # LeRobot's layout
-    return published
 
 
 def frontend_metadata(files: dict[str, Path | bytes]) -> dict | None:
@@ -270,8 +179,6 @@ def result_limitations(records: list[dict], baselines: list[dict], config: dict)
     if config.get("type") == "predvla" and config.get("er_iterations", 0) and open_loop:
         ahead = main["successes"] - open_loop[0]["successes"]
         verdict = (f"{ahead} more than" if ahead > 0 else "as many as" if ahead == 0 else f"{-ahead} fewer than")
-        from lerobot_predvla.experiments.headline import PAPER_OBJECT
-
         lead = PAPER_OBJECT["error_regression"][0] - PAPER_OBJECT["open_loop"][0]
         lines.append(f"- Error regression succeeds in {_rate(main)} episodes, {verdict} exact open loop "
                      f"(`--policy.er_iterations=0`: {_rate(open_loop[0])}), {protocol}; the paper reports error "
@@ -405,8 +312,6 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None, co
             if processes > 1 else "")
         planned = f" (its training configuration planned {train_cfg['steps']:,})" if steps != train_cfg["steps"] else ""
         lines += ["", f"Trained for {steps:,} steps{planned}, {batch}, seed {train_cfg['seed']}."]
-    from lerobot_predvla.experiments.headline import config_departures
-
     departures = config_departures(config)
     if departures:
         lines += ["", "Departures from the configuration class's defaults (for PredVLA: the paper's Table 2): "
@@ -418,9 +323,6 @@ def inference_settings(record: dict, config: dict) -> dict:
     """The policy fields a recorded evaluation ran with that differ from the published `config.json`: the recorded
     training's `--policy.*` values (the checkpoint it evaluated) under the evaluation's overrides. A field that
     `config.json` lacks (saved before the field existed) loads as its default, so it is compared with that."""
-    from lerobot_predvla.experiments.headline import config_defaults, differs
-    from lerobot_predvla.experiments.sweep import NOT_RECIPE
-
     train = (record.get("commands") or {}).get("train") or []
     fields = dict(w[len("--policy."):].split("=", 1) for w in train if w.startswith("--policy.") and "=" in w)
     fields.update(record.get("eval_overrides") or {})
@@ -449,13 +351,9 @@ def _records_section(records: list[dict], config: dict) -> str:
     return "\n".join(lines)
 
 
-def _results_section(report: Path | None, config_name: str | None, records: list[dict] | None = None,
-                     config: dict | None = None) -> str:
-    if records:
-        return _records_section(records, config or {})
-    if report is None:
-        return "No evaluation results were attached when publishing (`predvla push --results REPORT_DIR`)."
-    summary = load_summary(report)
+def report_results(summary: dict, report: Path, config_name: str | None) -> str:
+    """The card's results from a `predvla report` summary (`report.json` of `report`, loaded): one configuration's
+    success per suite; `config_name` chooses it (default `predvla`, or the report's only one)."""
     names = list(summary["configs"])
     name = config_name or ("predvla" if "predvla" in names else names[0] if len(names) == 1 else None)
     if name not in summary["configs"]:
@@ -478,7 +376,15 @@ def _results_section(report: Path | None, config_name: str | None, records: list
     return "\n".join(lines)
 
 
-def _policy_type(config: dict, where: Path) -> str:
+def _results_section(report: str | None, records: list[dict] | None, config: dict) -> str:
+    if records:
+        return _records_section(records, config)
+    if report is None:
+        return "No evaluation results were attached when publishing (`predvla push --results REPORT_DIR`)."
+    return report
+
+
+def check_policy_type(config: dict, where: Path) -> str:
     """The checkpoint's policy type, which must be one of this plugin's (else one clear line)."""
     policy_type = config.get("type")
     if policy_type not in POLICY_TYPES:
@@ -489,23 +395,16 @@ def _policy_type(config: dict, where: Path) -> str:
     return policy_type
 
 
-def _model_section(config: dict) -> dict[str, str]:
-    """Title, description and the type-specific lines of the card, for each policy type of the plugin."""
-    policy_type = config["type"]
-    config_cls = PreTrainedConfig.get_choice_class(policy_type)
-    values = {
-        "policy_type": policy_type,
-        "policy_class": config_cls.__name__.removesuffix("Config") + "Policy",
-        "posterior_note": "",
-        "er_limitation": "",
-    }
-    shared = (
-        "It reads the cached features of PredVLA's frozen front end and decodes a Gaussian-mixture action with "
-        "PredVLA's head, trained on the same data."
-    )
-    if policy_type == "predvla":
-        values["model_title"] = "PredVLA"
-        values["model_description"] = (
+_SHARED_HEAD = (
+    "It reads the cached features of PredVLA's frozen front end and decodes a Gaussian-mixture action with "
+    "PredVLA's head, trained on the same data."
+)
+
+
+def _predvla_section(config: dict) -> dict[str, str]:
+    return {
+        "model_title": "PredVLA",
+        "model_description": (
             "PredVLA is a language-conditioned **predictive-coding** policy for robot manipulation (paper: *PredVLA: "
             "Predictive Sensorimotor Modeling for Sub-Million-Parameter Robot Manipulation*). A hierarchical recurrent "
             "network of four modules (task T, vision V, upper and lower action A) with time constants "
@@ -515,55 +414,93 @@ def _model_section(config: dict) -> dict[str, str]:
             f"{config['er_iterations']} Adam iterations (step {_format_value(config['er_lr'])}) to minimise the free "
             "energy of the prediction errors, and the action is decoded from the corrected state. Language "
             "conditions the top module."
-        )
-        values["posterior_note"] = (
+        ),
+        "posterior_note": (
             "Training posteriors (one latent per demonstration, step and module) are optimised during training only "
             "and are not part of this repository."
-        )
-        values["er_limitation"] = (
+        ),
+        "er_limitation": (
             f"- Error regression runs {config['er_iterations']} optimiser iterations per control step; its cost "
             f"grows with the window ({config['er_window']} steps).\n"
-        )
-    elif policy_type == "predvla_ladder":
-        values["model_title"] = f"PredVLA ladder rung {config['rung']}"
-        values["model_description"] = (
+        ),
+    }
+
+
+def _ladder_section(config: dict) -> dict[str, str]:
+    return {
+        "model_title": f"PredVLA ladder rung {config['rung']}",
+        "model_description": (
             f"Rung {config['rung']} of the paper's mechanism ladder from PredVLA to BC-RNN (Section 4.5): PredVLA with "
             "part of its mechanism removed (no free variables or error regression from L2 on; observations as "
-            f"inputs from L3; no temporal hierarchy from L4; LSTM cells at L5). {shared}"
-        )
-    elif policy_type == "predvla_bc_rnn":
-        values["model_title"] = "BC-RNN baseline"
-        values["model_description"] = (
+            f"inputs from L3; no temporal hierarchy from L4; LSTM cells at L5). {_SHARED_HEAD}"
+        ),
+    }
+
+
+def _bc_rnn_section(config: dict) -> dict[str, str]:
+    return {
+        "model_title": "BC-RNN baseline",
+        "model_description": (
             "The paper's BC-RNN baseline (B2): an LSTM over held visual features, proprioception and the instruction "
-            f"embedding, trained by behaviour cloning. {shared}"
-        )
-    else:
-        values["model_title"] = f"BC-Transformer baseline (chunk {config['chunk_size']})"
-        values["model_description"] = (
+            f"embedding, trained by behaviour cloning. {_SHARED_HEAD}"
+        ),
+    }
+
+
+def _bc_transformer_section(config: dict) -> dict[str, str]:
+    return {
+        "model_title": f"BC-Transformer baseline (chunk {config['chunk_size']})",
+        "model_description": (
             "The paper's BC-Transformer baseline (B1, B3, B4 by action chunk size): a causal Transformer over a window "
             f"of held visual features, proprioception and the instruction embedding, trained by behaviour cloning. "
-            f"{shared}"
-        )
-    return values
+            f"{_SHARED_HEAD}"
+        ),
+    }
+
+
+# Each policy type's own part of the card: title, description and, optionally, posterior note and error-regression
+# limitation. tests/test_hub.py checks that every type of POLICY_TYPES has one.
+MODEL_SECTIONS: dict[str, Callable[[dict], dict[str, str]]] = {
+    "predvla": _predvla_section,
+    "predvla_bc_transformer": _bc_transformer_section,
+    "predvla_bc_rnn": _bc_rnn_section,
+    "predvla_ladder": _ladder_section,
+}
+
+
+def _model_section(config: dict) -> dict[str, str]:
+    """The card's values that depend on the policy type: its class and its own section (`MODEL_SECTIONS`)."""
+    policy_type = config["type"]
+    section = MODEL_SECTIONS.get(policy_type)
+    if section is None:
+        raise HubError(f"policy type {policy_type!r} has no model card section (hub/card.py MODEL_SECTIONS).")
+    config_cls = PreTrainedConfig.get_choice_class(policy_type)
+    return {
+        "policy_type": policy_type,
+        "policy_class": config_cls.__name__.removesuffix("Config") + "Policy",
+        "posterior_note": "",
+        "er_limitation": "",
+        **section(config),
+    }
 
 
 def render_card(
     files: dict[str, Path | bytes],
     repo_id: str,
     dataset: DatasetSummary | None = None,
-    report: Path | None = None,
-    report_config: str | None = None,
+    report: str | None = None,
     records: list[dict] | None = None,
     baselines: list[dict] | None = None,
 ) -> str:
     """The model card for the files about to be published, with every value filled in. `repo_id` is where a reader
-    loads it from (a Hub repo, or a directory of this repository); `records`: its evaluations (`evaluation_records`),
-    shown instead of a report's aggregate, and `baselines` the BC runs beside them (`baseline_records`)."""
+    loads it from (a Hub repo, or a directory of this repository); `report`: a `predvla report` table
+    (`report_results`); `records`: its evaluations (`evaluation_records`), shown instead of a report's table, and
+    `baselines` the BC runs beside them (`baseline_records`)."""
     config = read_json(files, "config.json")
     train_cfg = read_json(files, "train_config.json") if "train_config.json" in files else None
     dataset_repo_id = dataset.repo_id if dataset else (train_cfg["dataset"]["repo_id"] if train_cfg else "unknown")
     frontend_section, pca_values = _frontend_section(frontend_metadata(files))
-    _policy_type(config, files["config.json"])
+    check_policy_type(config, files["config.json"])
     model = _model_section(config)
     lerobot_fields = {f.name for f in dataclasses.fields(PreTrainedConfig)}
     config_cls = PreTrainedConfig.get_choice_class(config["type"])
@@ -595,7 +532,7 @@ def render_card(
             for k in own_fields if k in config),
         "eval_command": eval_command(repo_id, _suite_of(dataset_repo_id) or "libero_object", *protocol),
         "eval_protocol": eval_protocol(main),
-        "results_section": _results_section(report, report_config, records, config),
+        "results_section": _results_section(report, records, config),
         "result_limitations": result_limitations(records or [], baselines or [], config),
         "seed_limitation": (f"This checkpoint is one training seed ({train_cfg['seed']}); " if train_cfg else "")
         + "success rates vary substantially between training seeds of the same recipe: compare recipes over several "
@@ -612,116 +549,3 @@ def render_card(
     if leftover:
         raise HubError(f"{CARD_TEMPLATE}: placeholders left after rendering: {sorted(set(leftover))}.")
     return card
-
-
-# ----- checkpoints committed in this repository ----------------------------------------------------------
-def shipped_checkpoints(root: Path) -> list[Path]:
-    """The checkpoint directories committed under `root/checkpoints/`: every folder holding a policy `config.json`,
-    both `checkpoints/<name>/` and the models sweeps publish (`train.publish`, e.g.
-    `checkpoints/<sweep>/<config>_seed<seed>/`)."""
-    return sorted(config.parent for config in (Path(root) / "checkpoints").rglob("config.json"))
-
-
-def repository_files(checkpoint: Path, root: Path) -> dict[str, bytes]:
-    """The configs and model card of a checkpoint directory committed in this repository (`root`), as every publishing
-    route writes them: configs without the training machine's paths and device (`without_machine_paths`), the card
-    loaded from the checkpoint's path with every evaluation recorded under `root/results/`. `predvla report --docs`
-    writes them into the checkpoint (its weights are never rewritten)."""
-    checkpoint, root = Path(checkpoint).resolve(), Path(root).resolve()
-    files = without_machine_paths(publishable_files(checkpoint))
-    records = evaluation_records(checkpoint, root / "results")
-    card = render_card(files, checkpoint.relative_to(root).as_posix(), records=records,
-                       baselines=baseline_records(records, root / "results"))
-    return {**{rel: src for rel, src in files.items() if isinstance(src, bytes)}, CARD_FILE: card.encode()}
-
-
-# ----- upload ----------------------------------------------------------------------------------------------
-def upload_files(
-    files: dict[str, Path | bytes], repo_id: str, private: bool | None, commit_message: str, token: str | None = None
-) -> str:
-    """Create the model repository if needed and commit `files` to it; returns the commit URL."""
-    api = HfApi(token=token)
-    repo_id = api.create_repo(repo_id=repo_id, repo_type="model", private=private, exist_ok=True).repo_id
-    operations = [
-        CommitOperationAdd(path_in_repo=rel, path_or_fileobj=src if isinstance(src, bytes) else str(src))
-        for rel, src in sorted(files.items())
-    ]
-    info = api.create_commit(repo_id=repo_id, repo_type="model", operations=operations, commit_message=commit_message)
-    return info.commit_url
-
-
-def collect_checkpoint(checkpoint: Path, frontend: Path | None = None) -> tuple[dict[str, Path], Path | None]:
-    """Files to publish from a saved checkpoint, and the training dataset root recorded in it (if any)."""
-    pretrained = pretrained_dir(checkpoint)
-    files = publishable_files(pretrained)
-    dataset_root = None
-    if "train_config.json" in files:
-        root = json.loads(files["train_config.json"].read_text())["dataset"].get("root")
-        dataset_root = Path(root) if root else None
-    source = frontend_source(pretrained, dataset_root, frontend)
-    if source is not None:
-        files = {k: v for k, v in files.items() if not k.startswith(f"{FRONTEND_DIR}/")}
-        files.update({f"{FRONTEND_DIR}/{name}": source / name for name in (METADATA_FILE, TENSORS_FILE)})
-    return files, dataset_root
-
-
-def push_checkpoint(
-    checkpoint: Path,
-    repo_id: str,
-    *,
-    private: bool | None = None,
-    frontend: Path | None = None,
-    report: Path | None = None,
-    report_config: str | None = None,
-    dry_run: bool = False,
-) -> tuple[dict[str, Path | bytes], str | None]:
-    """Publish a saved checkpoint with its card in one commit. Returns the files and the commit URL.
-
-    `report`: a `predvla report` output (its aggregate for `report_config`), or a results folder such as this
-    repository's `results/`, whose sweep run records of this checkpoint fill the card's results (`evaluation_records`).
-    """
-    files, dataset_root = collect_checkpoint(checkpoint, frontend)
-    records = baselines = None
-    if report is not None and Path(report).is_dir() and not (Path(report) / SUMMARY_FILE).is_file():
-        records = evaluation_records(pretrained_dir(checkpoint), report)
-        baselines = baseline_records(records, report)
-        if not records:
-            raise HubError(f"{report}: neither a report ({SUMMARY_FILE}) nor a results folder with run records "
-                           f"(*/runs/records/) of {checkpoint}.")
-        report = None
-    _policy_type(json.loads(files["config.json"].read_text()), files["config.json"])
-    dataset = None
-    if dataset_root is not None and "train_config.json" in files:
-        repo = json.loads(files["train_config.json"].read_text())["dataset"]["repo_id"]
-        dataset = DatasetSummary.from_root(repo, dataset_root)
-    published = without_machine_paths(files)
-    published[CARD_FILE] = render_card(published, repo_id, dataset, report, report_config, records,
-                                       baselines).encode()
-    published[MANIFEST_FILE] = manifest_text(published).encode()  # SHA-256 of every file of the commit
-    if dry_run:
-        return published, None
-    return published, upload_files(published, repo_id, private, "Upload PredVLA policy, processors, front end, card")
-
-
-def push_policy(
-    policy, repo_id: str, *, cfg=None, state_dict=None, dataset_meta=None, private: bool | None = None
-) -> str:
-    """Publish an in-memory policy: the network (no posteriors), train config when given, artefact and card.
-
-    `lerobot-train --policy.push_to_hub=true` reaches this through `PredVLAPolicy.push_model_to_hub` (with the
-    train config and dataset metadata), `policy.push_to_hub(repo_id)` without them.
-    """
-    with tempfile.TemporaryDirectory() as tmp:
-        stage = Path(tmp)
-        policy.save_pretrained(stage, state_dict=state_dict)
-        if cfg is not None:
-            cfg.save_pretrained(stage)
-        root = Path(dataset_meta.root) if dataset_meta is not None else None
-        source = frontend_source(stage, root, None)
-        if source is not None and source != stage / FRONTEND_DIR:
-            shutil.copytree(source, stage / FRONTEND_DIR, ignore=shutil.ignore_patterns(".*"))
-        published = without_machine_paths(publishable_files(stage))
-        dataset = DatasetSummary.from_meta(dataset_meta) if dataset_meta is not None else None
-        published[CARD_FILE] = render_card(published, repo_id, dataset).encode()
-        published[MANIFEST_FILE] = manifest_text(published).encode()
-        return upload_files(published, repo_id, private, "Upload PredVLA policy weights, train config, front end, card")

@@ -21,7 +21,7 @@ from lerobot.datasets.video_utils import decode_video_frames
 from lerobot.utils.constants import ACTION, OBS_STATE
 from lerobot.utils.import_utils import get_safe_default_video_backend
 
-from lerobot_predvla.policies.common.cached_features import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
+from lerobot_predvla.columns import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 
 INFO_FILE = "meta/info.json"
 SOURCE_ORIENTATION = "as stored in the LeRobot dataset (no rotation)"
