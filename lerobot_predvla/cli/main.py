@@ -18,6 +18,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.cli.features_only",
     "lerobot_predvla.cli.inspect",
     "lerobot_predvla.cli.trace",
+    "lerobot_predvla.cli.divergence",
     "lerobot_predvla.cli.sweep",
     "lerobot_predvla.cli.report",
     "lerobot_predvla.cli.push",
