@@ -4,7 +4,8 @@ For each task, the first --demos demonstrations of its hdf5 file are started fro
 the checkpoint's exact open-loop actions (er_iterations=0, unnormalised by its postprocessor) are run up to --cap
 steps, beside the demonstration's own actions replayed and another demonstration's plan replayed blind. Writes
 OUT/task<k>.png (end effector, gripper, distances to the demonstration with its phases shaded, offline action
-error and the demonstrations' action envelope) and OUT/divergence.json. Physics only, no rendering.
+error and the demonstrations' action envelope), OUT/divergence.json and OUT/summary.md (its main numbers as
+markdown tables). Physics only, no rendering.
 
   predvla divergence --checkpoint checkpoints/predvla_libero_object_table2 \\
     --hdf5-root outputs/libero_object_table2/hdf5 --tasks 1,4,7 --demos 3 --out results/.../divergence
@@ -28,6 +29,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--demos", type=int, default=3, help="demonstrations simulated per task (the file's first)")
     p.add_argument("--cap", type=int, default=600, help="open-loop step cap (default 600, the evaluation's)")
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--merge", action="store_true",
+                   help="keep the other tasks of an existing OUT/divergence.json (same checkpoint, demonstrations and "
+                   "cap) and add or replace the tasks run now")
     p.set_defaults(func=run)
 
 
@@ -40,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     from lerobot_predvla.experiments.divergence import run as run_divergence
 
-    run_divergence(args.checkpoint, args.hdf5_root, args.tasks, args.demos, args.cap, args.out, args.suite)
+    run_divergence(args.checkpoint, args.hdf5_root, args.tasks, args.demos, args.cap, args.out, args.suite,
+                   merge=args.merge)
     print(f"wrote {args.out / 'divergence.json'} and task figures to {args.out}")
     return 0

@@ -26,6 +26,7 @@ prior chain's one-step, training-mode error) cannot be measured here.
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
@@ -328,8 +329,45 @@ class OpenLoop:
         return raw.detach().cpu().double().numpy()
 
 
+EFFECT_WINDOWS = ((0, 5), (5, 10), (10, 20), (20, 50), (50, None))
+
+
+def instruction_effect(own: np.ndarray, others: list[np.ndarray], horizon: int) -> np.ndarray:
+    """Per step, the mean over `others` of the squared difference from `own` (mean over the 7 dimensions), NaN where
+    an other sequence has ended: how much the instruction changes the actions at each step."""
+    diffs = np.full((len(others), horizon), np.nan)
+    for i, other in enumerate(others):
+        k = min(horizon, len(other), len(own))
+        diffs[i, :k] = ((own[:k] - other[:k]) ** 2).mean(-1)
+    if not len(others):
+        return np.full(horizon, np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # steps where every other sequence has ended: NaN
+        return np.nanmean(diffs, axis=0)
+
+
+def window_means(curve: np.ndarray) -> dict[str, float]:
+    out = {}
+    for lo, hi in EFFECT_WINDOWS:
+        part = curve[lo:hi]
+        if len(part) and not np.isnan(part).all():
+            out[f"{lo}-{hi if hi is not None else len(curve)}"] = float(np.nanmean(part))
+    return out
+
+
+def mean_demo(actions: list[np.ndarray]) -> np.ndarray:
+    """Time-aligned mean of demonstrations, up to the step where fewer than ENVELOPE_MIN_DEMOS of them run."""
+    longest = max(len(a) for a in actions)
+    stack = np.full((len(actions), longest, 7), np.nan)
+    for i, a in enumerate(actions):
+        stack[i, :len(a)] = a
+    enough = (~np.isnan(stack[..., 0])).sum(0) >= ENVELOPE_MIN_DEMOS * len(actions)
+    return np.nanmean(stack[:, :int(np.nonzero(enough)[0].max()) + 1], axis=0)
+
+
 def run_task(open_loop: OpenLoop, hdf5_root: Path, task_id: int, demos: int, cap: int, suite: str = "libero_object",
-             log=print) -> tuple[dict, dict]:
+             log=print, other_open_loops: dict[int, np.ndarray] | None = None,
+             other_mean_demos: dict[int, np.ndarray] | None = None) -> tuple[dict, dict]:
     """The simulator and offline comparisons of one task: (numbers for the JSON, arrays for the figure)."""
     from lerobot_predvla.libero.env import make_env, task_spec
 
@@ -391,6 +429,11 @@ def run_task(open_loop: OpenLoop, hdf5_root: Path, task_id: int, demos: int, cap
             all_bounds.append(phase_bounds(g["actions"][()], g["obs/ee_pos"][()]))
     offline = offline_actions(ol, all_actions)
     med = median_bounds(all_bounds)
+    h = offline["horizon"]
+    others = {k: v for k, v in (other_open_loops or {}).items() if k != task_id}
+    other_demos = {k: v for k, v in (other_mean_demos or {}).items() if k != task_id}
+    offline["instruction_effect_open_loop"] = instruction_effect(ol, list(others.values()), h)
+    offline["instruction_effect_demos"] = instruction_effect(mean_demo(all_actions), list(other_demos.values()), h)
     exits = offline["first_exit_step_per_dim"]
     numbers = {
         "task_id": task_id, "task": spec.name, "instruction": spec.language, "demo_file": str(path),
@@ -413,6 +456,13 @@ def run_task(open_loop: OpenLoop, hdf5_root: Path, task_id: int, demos: int, cap
             "first_exit_phase_per_dim": {k: (phase_of(s, med) if s >= 0 else None) for k, s in exits.items()},
             "first_exit_step_any_dim": offline["first_exit_step_any_dim"],
             "median_abs_z_per_dim": offline["median_abs_z_per_dim"],
+            # How much the instruction changes the actions, by step window: this task's open loop against the open
+            # loop under each other instruction of the suite, and its mean demonstration against the other tasks'
+            # mean demonstrations (those whose files exist).
+            "instruction_effect": {
+                "open_loop_vs_other_instructions": window_means(offline["instruction_effect_open_loop"]),
+                "mean_demo_vs_other_tasks": window_means(offline["instruction_effect_demos"]),
+                "other_instructions": sorted(others), "other_tasks_with_demos": sorted(other_demos)},
         },
     }
     return numbers, {"curves": curves, "offline": offline, "open_loop": ol, "median_bounds": med, "spec": spec}
@@ -496,6 +546,9 @@ def plot_task(path: Path, arrays: dict, numbers: dict) -> None:
     ax.plot(offline["mse_vs_demos"], "k", lw=1.2, label="open loop vs every demo (mean)")
     ax.plot(offline["mse_vs_mean"], "C3", lw=1, label="open loop vs mean demo")
     ax.plot(offline["demo_spread"], "0.5", lw=1, ls="--", label="demos vs mean demo (spread)")
+    ax.plot(offline["instruction_effect_open_loop"], "C4", lw=1, ls=":",
+            label="open loop vs other instructions' open loop")
+    ax.plot(offline["instruction_effect_demos"], "C2", lw=1, ls=":", label="mean demo vs other tasks' mean demos")
     for c, col in zip(curves, colours, strict=True):
         ax.plot(c["action_err"], color=col, lw=0.6, alpha=0.7)
     ax.set(title=f"action MSE per step, raw units (all {numbers['demos_in_file']} demos; thin: vs each\n"
@@ -527,24 +580,128 @@ def plot_task(path: Path, arrays: dict, numbers: dict) -> None:
 
 
 def run(checkpoint: Path, hdf5_root: Path, tasks: list[int], demos: int, cap: int, out: Path,
-        suite: str = "libero_object", log=print) -> dict:
+        suite: str = "libero_object", log=print, merge: bool = False) -> dict:
+    """Writes OUT/task<k>.png, OUT/divergence.json and OUT/summary.md. With `merge`, the tasks of an existing
+    OUT/divergence.json of the same checkpoint, demonstrations and cap are kept (their figures stay as they are)
+    and the tasks run now are added or replaced."""
     from lerobot_predvla.utils.io import atomic_write_json
 
     out.mkdir(parents=True, exist_ok=True)
+    from lerobot_predvla.libero.env import num_tasks, task_spec
+
     open_loop = OpenLoop(checkpoint)
+    other_open_loops, other_mean_demos = {}, {}
+    for k in range(num_tasks(suite)):
+        spec = task_spec(suite, k)
+        other_open_loops[k] = open_loop.actions(spec.language, cap)
+        path = demo_file(hdf5_root, suite, spec.name)
+        if path.is_file():
+            other_mean_demos[k] = mean_demo(read_all_actions(path))
+    # How much the instruction changes the actions at each step, for every task of the suite (offline): the open
+    # loop against the open loop under each other instruction, the mean demonstration against the other tasks'.
+    effect = {}
+    for k, ol_k in other_open_loops.items():
+        if k not in other_mean_demos:
+            continue
+        h = min(len(other_mean_demos[k]), cap)
+        effect[str(k)] = {
+            "open_loop_vs_other_instructions": window_means(instruction_effect(
+                ol_k, [v for j, v in other_open_loops.items() if j != k], h)),
+            "mean_demo_vs_other_tasks": window_means(instruction_effect(
+                other_mean_demos[k], [v for j, v in other_mean_demos.items() if j != k], h)),
+            "other_tasks_with_demos": sorted(j for j in other_mean_demos if j != k)}
     report = {"checkpoint": str(checkpoint), "hdf5_root": str(hdf5_root), "suite": suite, "cap": cap,
               "demos_per_task": demos, "separation_thresholds_m": list(SEPARATION_THRESHOLDS_M),
               "phase_rule": {"lift_rise_m": LIFT_RISE_M, "top_margin_m": TOP_MARGIN_M},
               "envelope": {"min_demo_fraction": ENVELOPE_MIN_DEMOS, "exit_run_steps": EXIT_RUN,
                            "margin": ENVELOPE_MARGIN},
-              "blind_idle_steps": BLIND_IDLE_STEPS, "tasks": {}}
+              "blind_idle_steps": BLIND_IDLE_STEPS, "instruction_effect_windows": [list(w) for w in EFFECT_WINDOWS],
+              "instruction_effect_by_task": effect, "tasks": {}}
+    previous = out / "divergence.json"
+    if merge and previous.is_file():
+        old = load_report(previous)
+        same = ("checkpoint", "hdf5_root", "suite", "cap")
+        if any(old.get(k) != report[k] for k in same):
+            raise ValueError(f"{previous}: another run ({', '.join(f'{k}={old.get(k)}' for k in same)}); cannot merge")
+        report["tasks"] = {k: v for k, v in old["tasks"].items() if int(k) not in tasks}
+        report["merged_from_earlier_runs"] = sorted(report["tasks"], key=int)
     for task_id in tasks:
-        numbers, arrays = run_task(open_loop, hdf5_root, task_id, demos, cap, suite, log)
+        numbers, arrays = run_task(open_loop, hdf5_root, task_id, demos, cap, suite, log, other_open_loops,
+                                   other_mean_demos)
         plot_task(out / f"task{task_id}.png", arrays, numbers)
         report["tasks"][str(task_id)] = numbers
         atomic_write_json(out / "divergence.json", report)
+    report["tasks"] = dict(sorted(report["tasks"].items(), key=lambda kv: int(kv[0])))
+    atomic_write_json(out / "divergence.json", report)
+    (out / "summary.md").write_text(markdown_summary(report))
     return report
 
 
 def load_report(path: Path) -> dict:
     return json.loads(Path(path).read_text())
+
+
+def _cm(value: float) -> str:
+    return f"{value * 100:.1f}"
+
+
+def _sep(row: dict, name: str, key: str) -> str:
+    sep = row[name]["separation"][key]
+    return "never" if sep["step"] < 0 else f"{sep['step']} ({sep['phase']})"
+
+
+def markdown_summary(report: dict) -> str:
+    """The report's main numbers as markdown tables (what the write-up quotes)."""
+    lines = ["| task | demo | length | phases (grasp, lift, carry, release) | open loop leaves by 2 cm | by 5 cm | "
+             "at the demo's close: distance (cm), height above (cm), yaw error (rad) | open loop success | "
+             "with the demo's rotation | another demo's plan, blind | own replay max (cm) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for task_id, task in report["tasks"].items():
+        for row in task["demos"]:
+            ph = row["phases"]
+            close = row["open_loop"]["at_demo_close"]
+            blind = row.get("blind_plan")
+
+            def success(r):
+                return "no" if r["success_step"] < 0 else f"step {r['success_step']}"
+
+            lines.append(
+                f"| {task_id} | {row['demo']} | {row['length']} | {ph['grasp']}, {ph['lift']}, {ph['carry/place']}, "
+                f"{ph['release']} | {_sep(row, 'open_loop', '2cm')} | {_sep(row, 'open_loop', '5cm')} | "
+                f"{_cm(close['ee_distance_m'])}, {_cm(close['ee_dxyz_m'][2])}, {close['orientation_error_rad']:.2f} | "
+                f"{success(row['open_loop'])} | {success(row['open_loop_demo_rotation'])} | "
+                f"{success(blind) if blind else '-'} | {_cm(row['replay']['ee_max_m'])} |")
+    lines += ["", "| task | rollout | end-effector distance per phase, mean (cm): approach / grasp / lift / carry / "
+              "release | joint error mean (rad) | lowest hand height (cm) | object lifted (cm) |",
+              "|---|---|---|---|---|---|"]
+    for task_id, task in report["tasks"].items():
+        for name in ("open_loop", "open_loop_demo_rotation", "blind_plan"):
+            rows = [r[name] for r in task["demos"] if name in r]
+            if not rows:
+                continue
+            per_phase = " / ".join(
+                _cm(np.mean([r["per_phase"][p]["ee_mean_m"] for r in rows if p in r["per_phase"]]))
+                if any(p in r["per_phase"] for r in rows) else "-" for p in PHASES)
+            lines.append(f"| {task_id} | {name} | {per_phase} | {np.mean([r['joint_mean_rad'] for r in rows]):.2f} | "
+                         f"{', '.join(_cm(r['min_ee_height_m']) for r in rows)} | "
+                         f"{', '.join(_cm(r['object_rise_max_m']) for r in rows)} |")
+    lines += ["", "| task | action MSE: open loop vs demos / vs mean demo / demos' spread | per phase, open loop vs "
+              "demos (approach, grasp, lift, carry, release) | inside the envelope (all 7 dims) | first exit step per "
+              "dim (dx dy dz droll dpitch dyaw grip) | instruction effect steps 0-5 / 5-10 / 10-20: open loop, demos |",
+              "|---|---|---|---|---|---|"]
+    for task_id, task in report["tasks"].items():
+        o = task["offline"]
+        pp = o["per_phase"]["open_loop_mse_vs_demos"]
+        eff = report.get("instruction_effect_by_task", {}).get(task_id) or o.get("instruction_effect", {})
+
+        def windows(d):
+            return " / ".join(f"{d[w]:.3f}" if w in d else "-" for w in ("0-5", "5-10", "10-20"))
+
+        lines.append(
+            f"| {task_id} | {o['open_loop_mse_vs_demos']:.3f} / {o['open_loop_mse_vs_mean_demo']:.3f} / "
+            f"{o['demo_spread_mse']:.3f} | {', '.join(f'{pp[p]:.3f}' if p in pp else '-' for p in PHASES)} | "
+            f"{o['inside_envelope_fraction_all_dims']:.0%} | "
+            f"{' '.join(str(o['first_exit_step_per_dim'][str(k)]) for k in range(7))} | "
+            f"{windows(eff.get('open_loop_vs_other_instructions', {}))}; "
+            f"{windows(eff.get('mean_demo_vs_other_tasks', {}))} |")
+    return "\n".join(lines) + "\n"
