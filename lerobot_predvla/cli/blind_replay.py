@@ -17,7 +17,8 @@ import sys
 import time
 from pathlib import Path
 
-from lerobot_predvla.libero.protocol import PAPER_EPISODE_LENGTH, SUITES
+from lerobot_predvla.columns import SUITES
+from lerobot_predvla.libero.protocol import PAPER_EPISODE_LENGTH
 
 
 def _ints(flag: str):

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lerobot_predvla.columns import SUITES
 from lerobot_predvla.experiments.report import MISSING, SUMMARY_FILE, ReportError, run_episodes
 from lerobot_predvla.experiments.sweep import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
 from lerobot_predvla.hub.upload import repository_files, shipped_checkpoints
@@ -32,7 +33,6 @@ from lerobot_predvla.libero.protocol import (
     PAPER_EPISODES_PER_TASK,
     PAPER_OBJECT,
     SUITE_LABELS,
-    SUITES,
 )
 from lerobot_predvla.policies.recipe import config_departures
 from lerobot_predvla.utils.io import atomic_write_bytes

@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_predvla.libero.protocol import PAPER_EPISODE_LENGTH, SUITE_LABELS, SUITES
+from lerobot_predvla.columns import SUITES
+from lerobot_predvla.libero.protocol import PAPER_EPISODE_LENGTH, SUITE_LABELS
 from lerobot_predvla.libero.rollout import IDLE, SETTLE_STEPS
 
 PLANS = ("state0", "nearest_mean")
