@@ -80,9 +80,9 @@ def demo_root(tmp_path_factory):
 
     from lerobot_predvla.libero.rollout import run_episode
 
-    env = env_mod.make_env(spec, init_noise=env_mod.OFFICIAL_INIT_NOISE)
+    env = env_mod.make_env(spec)
     demos = []
-    for seed in (7, 8):
+    for seed in (7, 1000):  # seeds the expert solves (test_libero_demos.py)
         episode = run_episode(env, seed=seed, max_steps=280)
         assert episode.success, episode.note
         obs = {k: [] for k in ("joint_states", "gripper_states", "ee_pos", "ee_ori")}
@@ -121,13 +121,14 @@ def test_divergence_command_on_the_simulator(demo_root):
     row = task["demos"][0]
     assert row["blind_plan_demo"] == 1
     # The demonstration's own actions from its own first state reproduce it (the floor of every distance).
-    assert row["replay"]["ee_max_m"] < 0.005 and row["replay"]["steps_compared"] == 30
+    assert row["replay"]["ee_max_m"] < 0.005 and row["replay"]["steps_compared"] == row["length"] > 30
     for name in ("open_loop", "open_loop_demo_rotation", "blind_plan"):
         assert row[name]["steps_compared"] == 30
         assert set(row[name]["separation"]) == {"1cm", "2cm", "5cm", "10cm"}
     assert task["offline"]["horizon"] == 30
     phases = list(row["phases"].values())
     assert phases == sorted(phases)
+    assert (out / "summary.md").read_text().count(f"| {TASK_ID} |") >= 3
 
 
 @pytest.mark.simulator
