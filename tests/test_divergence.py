@@ -76,8 +76,8 @@ def demo_root(tmp_path_factory):
     except (RuntimeError, ImportError) as err:
         pytest.fail(f"LIBERO is not installed: run `make libero` ({err})")
     import robosuite.utils.transform_utils as T  # after env.py has chosen MUJOCO_GL
-    from lerobot_predvla.data.hdf5_layout import OBS_KEYS, task_file, write_task_file
 
+    from lerobot_predvla.libero.hdf5_layout import OBS_KEYS, task_file, write_task_file
     from lerobot_predvla.libero.rollout import run_episode
 
     env = env_mod.make_env(spec)
