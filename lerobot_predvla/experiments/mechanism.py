@@ -25,7 +25,6 @@ from lerobot_predvla.columns import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.policies.common.sequence_table import EpisodeSequences
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
-from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 
 
 @dataclass(frozen=True)
@@ -127,12 +126,8 @@ def train_policy(task: ReachTask, config: PredVLAConfig, steps: int, per_target:
     torch.manual_seed(seed)
     policy = PredVLAPolicy(config)
     sequences, targets = task.demonstrations(per_target, seed)
-    policy.sequences = sequences
+    policy.train_on(sequences)
     preset = config.get_optimizer_preset()
-    policy.posterior_store = PosteriorStore(
-        len(sequences.length), config.sequence_length, policy.model.posterior_dim, lr=config.posterior_lr,
-        betas=preset.betas, eps=preset.eps, dense=config.posterior_adam == "dense",
-    )
     optimizer = torch.optim.Adam(policy.network_parameters(), lr=preset.lr, betas=preset.betas, eps=preset.eps,
                                  weight_decay=preset.weight_decay)
     batch = {"episode_index": torch.arange(len(sequences.length))}
