@@ -111,6 +111,10 @@ def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys
         if (REPO / "results" / exp / "report.json").is_file():
             shutil.copytree(REPO / "results" / exp / "runs/records", tmp_path / "results" / exp / "runs/records")
             shutil.copy(REPO / "results" / exp / "report.json", tmp_path / "results" / exp / "report.json")
+    blind = Path("results/blind_replay/report.json")  # the reference row (`predvla blind-replay`)
+    if (REPO / blind).is_file():
+        (tmp_path / blind).parent.mkdir(parents=True)
+        shutil.copy(REPO / blind, tmp_path / blind)
     (tmp_path / "docs").mkdir()
     shutil.copy(REPO / README, tmp_path / README)
     shutil.copy(REPO / RESULTS_DOC, tmp_path / RESULTS_DOC)

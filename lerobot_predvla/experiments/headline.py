@@ -7,7 +7,10 @@ seeds with the seed count (`n = 1` for a single seed, never `± 0`), over the se
 other configurations extend it with further seeds (`pool_with`, as `predvla report` gathers them). The departures from
 the paper's protocol are read from the sweep file (demonstrations, front end, training recipe against PredVLAConfig's
 Table 2 defaults) and from the run records (episodes per task, step cap, seeds). Rows whose report does not exist yet
-are left out, so a new experiment leads the table once its `report.json` is committed.
+are left out, so a new experiment leads the table once its `report.json` is committed. A reference row, one
+demonstration replayed blind (`predvla blind-replay`), comes from `results/blind_replay/report.json` when it exists,
+with its per-suite success beside the paper's exact open loop and, on the detailed page, per task beside the leading
+row's exact open loop.
 
 `predvla report --docs` rewrites the block between HEADLINE_START and HEADLINE_END in README.md (the summary table)
 and docs/results.md (the summary table and a per-seed table), and the configs and model card of every shipped
@@ -21,10 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
-from lerobot_predvla.experiments.report import MISSING, SUMMARY_FILE, ReportError
+from lerobot_predvla.columns import SUITES
+from lerobot_predvla.experiments.report import MISSING, SUMMARY_FILE, ReportError, run_episodes
 from lerobot_predvla.experiments.sweep import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
 from lerobot_predvla.hub.upload import repository_files, shipped_checkpoints
-from lerobot_predvla.libero.protocol import PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, PAPER_OBJECT
+from lerobot_predvla.libero.protocol import (
+    PAPER_EPISODE_LENGTH,
+    PAPER_EPISODES_PER_TASK,
+    PAPER_OBJECT,
+    SUITE_LABELS,
+)
 from lerobot_predvla.policies.recipe import config_departures
 from lerobot_predvla.utils.io import atomic_write_bytes
 from lerobot_predvla.utils.manifest import MANIFEST_FILE, listed_files, manifest_text
@@ -39,6 +48,10 @@ PAPER_SEEDS = 14  # Table 3
 COLUMNS = (("error_regression", "PredVLA, error regression"), ("open_loop", "PredVLA, exact open loop"),
            ("bc_rnn", "BC-RNN"), ("bc_transformer", "BC-Transformer"))
 BASELINE_COLUMNS = ("bc_rnn", "bc_transformer")
+# The paper's exact open loop (Table 6, A6) per suite, beside one demonstration replayed blind.
+PAPER_OPEN_LOOP = {"libero_spatial": 73.79, "libero_object": 78.14, "libero_goal": 78.50, "libero_10": 28.00}
+BLIND_REPLAY = "blind_replay"  # results/blind_replay/report.json, written by `predvla blind-replay`
+BLIND_SECOND = "nearest_mean_plan"  # its second plan's key (lerobot_predvla.libero.blind_replay.NEAREST_MEAN_KEY)
 
 
 @dataclass(frozen=True)
@@ -228,11 +241,134 @@ def row_label(row: Row, prefix: str) -> str:
     return f"[{row.experiment.recipe}]({prefix}docs/glossary.md#recipes); {row.demonstrations} ([report]({link}))"
 
 
-def summary_table(rows: list[Row], prefix: str) -> str:
+def summary_table(rows: list[Row], prefix: str, blind: dict | None = None) -> str:
     body = [["paper (Tables 3, 4 and 6): 50 human demonstrations per task, ImageNet ResNet18, 50 episodes per task, "
              "600-step cap", *[_paper_cell(key) for key, _ in COLUMNS]]]
+    if blind and SUITE in blind:
+        body.append([blind_label(blind[SUITE], prefix),
+                     *[blind_cell(blind[SUITE]) if key == "open_loop" else MISSING for key, _ in COLUMNS]])
     body += [[row_label(row, prefix), *[row.cells[key].text() for key, _ in COLUMNS]] for row in rows]
     return _table(["libero_object success (%), mean over training seeds", *[name for _, name in COLUMNS]], body)
+
+
+# ----- the reference row: one demonstration replayed blind (`predvla blind-replay`) ----------------------------
+def load_blind_replay(root: Path) -> dict | None:
+    """results/blind_replay/report.json (suite -> task -> successes, episodes, ...), None when not committed."""
+    path = Path(root) / "results" / BLIND_REPLAY / SUMMARY_FILE
+    if not path.is_file():
+        return None
+    try:
+        report = json.loads(path.read_text())
+        for tasks in report.values():
+            for task in tasks.values():
+                int(task["successes"]), int(task["episodes"]), int(task[BLIND_SECOND]["successes"])
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+        raise ReportError(f"{path}: not a `predvla blind-replay` report ({err}).") from err
+    return report
+
+
+def blind_totals(tasks: dict, second: bool = False) -> tuple[int, int]:
+    rows = [t[BLIND_SECOND] if second else t for t in tasks.values()]
+    return sum(int(r["successes"]) for r in rows), sum(int(r["episodes"]) for r in rows)
+
+
+def _rate(successes: int, episodes: int) -> str:
+    return f"{100 * successes / episodes:.1f} ({successes}/{episodes})" if episodes else MISSING
+
+
+def _states_text(states: list[int]) -> str:
+    states = sorted(int(s) for s in states)
+    contiguous = states == list(range(states[0], states[-1] + 1))
+    return f"{states[0]}-{states[-1]}" if contiguous else ", ".join(map(str, states))
+
+
+def blind_protocol(tasks: dict) -> str:
+    """The replay states and cap of a suite's tasks, as one phrase."""
+    states = {_states_text(t["states"]) for t in tasks.values()}
+    caps = sorted({int(t["cap"]) for t in tasks.values()})
+    return f"official init states {' / '.join(sorted(states))}, a {'/'.join(map(str, caps))}-step cap"
+
+
+def blind_label(tasks: dict, prefix: str) -> str:
+    sources = sorted({int(t["source_state"]) for t in tasks.values()})
+    return (f"reference, not a policy: one demonstration replayed blind (the scripted expert's actions from official "
+            f"init state {'/'.join(map(str, sources))}, replayed with no observation; {blind_protocol(tasks)}) "
+            f"([report]({prefix}results/{BLIND_REPLAY}/report.md))")
+
+
+def blind_cell(tasks: dict) -> str:
+    """Success of the state-0 plan, then of the nearest-mean start's plan, pooled over the suite's tasks."""
+    return f"{_rate(*blind_totals(tasks))}; from the nearest-mean start {_rate(*blind_totals(tasks, second=True))}"
+
+
+def blind_suite_table(blind: dict) -> str:
+    body = []
+    for suite in SUITES:
+        tasks = blind.get(suite, {})
+        body.append([f"{suite} ({SUITE_LABELS[suite]})", f"{PAPER_OPEN_LOOP[suite]:.2f}",
+                     _rate(*blind_totals(tasks)) if tasks else "not run",
+                     _rate(*blind_totals(tasks, second=True)) if tasks else "not run", str(len(tasks))])
+    return _table(["suite", "paper, exact open loop (Table 6, A6), %", "one demonstration replayed blind: plan from "
+                   "official init state 0, % (successes/episodes)", "plan from the nearest-mean start, %",
+                   "tasks run"], body)
+
+
+def open_loop_per_task(root: Path, row: Row) -> dict[str, tuple[int, int]]:
+    """A row's exact open loop per libero_object task, successes and episodes pooled over its training seeds (from
+    the eval_info.json files under its results' runs/eval/)."""
+    out: dict[str, list[int]] = {}
+    runs_dir = Path(root) / "results" / row.experiment.results / "runs"
+    for seed, record in row.cells["open_loop"].records.items():
+        for (task, _), ok in run_episodes(runs_dir, record["config"], SUITE, seed).items():
+            counts = out.setdefault(str(task), [0, 0])
+            counts[0] += int(ok)
+            counts[1] += 1
+    return {task: (s, n) for task, (s, n) in sorted(out.items(), key=lambda kv: int(kv[0]))}
+
+
+def open_loop_starts(row: Row) -> str:
+    """Which official init states a row's exact open loop ran from, per training seed (episode i: state i)."""
+    by_count: dict[int, list[int]] = {}
+    for seed, record in row.cells["open_loop"].records.items():
+        by_count.setdefault(int(record["n_episodes_per_task"]), []).append(seed)
+    return ", ".join(f"official init states 0-{n - 1} (training seed{'s' if len(seeds) > 1 else ''} "
+                     f"{', '.join(map(str, seeds))})" for n, seeds in by_count.items())
+
+
+def blind_task_table(blind: dict, row: Row | None, open_loop: dict[str, tuple[int, int]]) -> str:
+    tasks = blind[SUITE]
+    seeds = ", ".join(map(str, row.cells["open_loop"].records)) if row else ""
+    header = ["libero_object task", "replayed blind: plan from state 0", "nearest-mean start (its source state)"]
+    if row:
+        header.append(f"PredVLA, exact open loop: {row.experiment.recipe}, training seeds {seeds} pooled")
+    body = []
+    for task_id, t in tasks.items():
+        second = t[BLIND_SECOND]
+        cells = [task_id, f"{t['successes']}/{t['episodes']}",
+                 f"{second['successes']}/{second['episodes']} ({second['source_state']})"]
+        if row:
+            s, n = open_loop.get(task_id, (0, 0))
+            cells.append(f"{s}/{n}" if n else MISSING)
+        body.append(cells)
+    return _table(header, body)
+
+
+def blind_text(root: Path, blind: dict | None, rows: list[Row], detailed: bool) -> list[str]:
+    """The sentence (and, `detailed`, the tables) that set one demonstration replayed blind beside the paper's exact
+    open loop per suite and a row's exact open loop per task."""
+    if not blind:
+        return []
+    parts = ["", "One demonstration replayed blind (a reference, not a policy: the scripted expert's actions from one "
+             "official init state of each task, replayed action by action with no observation on other official "
+             "init states, then idle up to the cap) against the paper's exact open loop, per suite:", "",
+             blind_suite_table(blind)]
+    if detailed and SUITE in blind:
+        row = next((r for r in rows if r.cells["open_loop"].n), None)
+        open_loop = open_loop_per_task(root, row) if row else {}
+        parts += ["", f"Per task on libero_object: the blind replays on {blind_protocol(blind[SUITE])}"
+                  + (f"; PredVLA's exact open loop on {open_loop_starts(row)}" if row else "") + ":", "",
+                  blind_task_table(blind, row, open_loop)]
+    return parts
 
 
 def best_baseline(row: Row) -> float | None:
@@ -284,8 +420,9 @@ def seed_table(rows: list[Row]) -> str:
     return _table(["row", "column", "configuration", "training seed", "successes", "protocol"], body)
 
 
-def render(rows: list[Row], prefix: str, detailed: bool) -> str:
-    parts = [HEADLINE_START, "", summary_table(rows, prefix), "", plain_sentence(rows), *departures_text(rows, prefix)]
+def render(rows: list[Row], prefix: str, detailed: bool, blind: dict | None = None, root: Path | None = None) -> str:
+    parts = [HEADLINE_START, "", summary_table(rows, prefix, blind), "", plain_sentence(rows),
+             *departures_text(rows, prefix), *blind_text(root, blind, rows, detailed)]
     if detailed:
         parts += ["", "Every seed behind the table (its run record under `results/<row>/runs/records/`):", "",
                   seed_table(rows)]
@@ -321,13 +458,14 @@ def update_docs(root: Path, check: bool = False) -> list[Path]:
     """Rewrite (or, with `check`, compare) the headline blocks and the shipped checkpoints' configs and model cards;
     returns the files that differ(ed). Every file is read and checked before any is written."""
     rows = build_rows(root)
+    blind = load_blind_replay(root)
     new = {}
     for name, prefix, detailed in ((README, "", False), (RESULTS_DOC, "../", True)):
         path = Path(root) / name
         if not path.is_file():
             raise ReportError(f"{path}: not found.")
         text = path.read_text()
-        updated = replace_block(text, render(rows, prefix, detailed), path)
+        updated = replace_block(text, render(rows, prefix, detailed, blind, root), path)
         if updated != text:
             new[path] = updated.encode()
     new.update(stale_checkpoint_files(root))

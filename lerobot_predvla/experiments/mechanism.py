@@ -15,6 +15,7 @@ runs. A small network and short episodes make a training take seconds on one cor
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import torch
 from lerobot.utils.constants import OBS_STATE
@@ -24,7 +25,6 @@ from lerobot_predvla.columns import OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.policies.common.sequence_table import EpisodeSequences
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
-from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 
 
 @dataclass(frozen=True)
@@ -113,6 +113,9 @@ def task_config(task: ReachTask, **overrides) -> PredVLAConfig:
 
 @dataclass
 class TrainingRecord:
+    """The training demonstrations' target indices (rows of the posterior store) and the loss at every step."""
+
+    targets: Tensor
     losses: list[float] = field(default_factory=list)
 
 
@@ -122,17 +125,13 @@ def train_policy(task: ReachTask, config: PredVLAConfig, steps: int, per_target:
     preset and gradient clip, then `update` for the posteriors), on full batches of the task's demonstrations."""
     torch.manual_seed(seed)
     policy = PredVLAPolicy(config)
-    sequences, _ = task.demonstrations(per_target, seed)
-    policy.sequences = sequences
+    sequences, targets = task.demonstrations(per_target, seed)
+    policy.train_on(sequences)
     preset = config.get_optimizer_preset()
-    policy.posterior_store = PosteriorStore(
-        len(sequences.length), config.sequence_length, policy.model.posterior_dim, lr=config.posterior_lr,
-        betas=preset.betas, eps=preset.eps, dense=config.posterior_adam == "dense",
-    )
     optimizer = torch.optim.Adam(policy.network_parameters(), lr=preset.lr, betas=preset.betas, eps=preset.eps,
                                  weight_decay=preset.weight_decay)
     batch = {"episode_index": torch.arange(len(sequences.length))}
-    record = TrainingRecord()
+    record = TrainingRecord(targets)
     policy.train()
     for _ in range(steps):
         loss, _ = policy.forward(batch)
@@ -146,12 +145,20 @@ def train_policy(task: ReachTask, config: PredVLAConfig, steps: int, per_target:
     return policy, record
 
 
+class Outcome(NamedTuple):
+    """What a batch of episodes did: final positions (episodes, 2), each episode's target index, and the mean
+    per-dimension visual prediction error of the chain that produced the actions (Eq. 7): the window's
+    regenerated states under error regression, the prior chain in exact open loop."""
+
+    position: Tensor
+    target: Tensor
+    visual_error: float
+
+
 @torch.no_grad()
-def rollout(task: ReachTask, policy: PredVLAPolicy, episodes_per_target: int, seed: int,
-            **overrides) -> tuple[Tensor, Tensor]:
+def rollout(task: ReachTask, policy: PredVLAPolicy, episodes_per_target: int, seed: int, **overrides) -> Outcome:
     """Act in the task with `select_action` for a batch of episodes (every target equally often), with the
-    config fields in `overrides` (e.g. `er_iterations=0`, exact open loop) set for the rollout only. Returns the
-    final positions and each episode's target index."""
+    config fields in `overrides` (e.g. `er_iterations=0`, exact open loop) set for the rollout only."""
     saved = {k: getattr(policy.config, k) for k in overrides}
     for k, v in overrides.items():
         setattr(policy.config, k, v)
@@ -159,22 +166,46 @@ def rollout(task: ReachTask, policy: PredVLAPolicy, episodes_per_target: int, se
         generator = torch.Generator().manual_seed(seed)
         which = torch.arange(task.num_targets).repeat(episodes_per_target)
         position = task.starts(which, generator)
-        code = task.codes[which]
+        code, language = task.codes[which], torch.zeros(len(which), 1)
         policy.reset()
         for _ in range(task.length):
-            action = policy.select_action({
-                OBS_VISION_FEATURES: code, OBS_STATE: position, OBS_LANGUAGE_FEATURES: torch.zeros(len(which), 1),
-            })
-            position = task.move(position, action)
-        return position, which
+            observation = {OBS_VISION_FEATURES: code, OBS_STATE: position, OBS_LANGUAGE_FEATURES: language}
+            position = task.move(position, policy.select_action(observation))
+        model, er = policy.model, policy.error_regression
+        if er.posteriors:  # error regression: the window (the whole episode) at its inferred posteriors
+            chain = model.rollout(er.start_state, er.lang_term, torch.stack(er.posteriors))
+        else:  # exact open loop: the prior chain it acted from
+            chain = model.rollout(model.initial_state(len(which)), model.language_term(language), steps=task.length)
+        steps = chain.d[0].shape[0]
+        visual_error = float(model.prediction_errors(chain, code.expand(steps, -1, -1), chain.q_hat)[0].mean())
+        return Outcome(position, which, visual_error)
     finally:
         for k, v in saved.items():
             setattr(policy.config, k, v)
         policy.reset()
 
 
-def success_rate(task: ReachTask, policy: PredVLAPolicy, episodes_per_target: int = 10, seed: int = 1000,
-                 **overrides) -> float:
+def success_rate(outcome: Outcome, task: ReachTask) -> float:
     """Fraction of episodes that end within `success_radius` of their own target."""
-    position, which = rollout(task, policy, episodes_per_target, seed, **overrides)
-    return float(((position - task.targets[which]).norm(dim=-1) < task.success_radius).float().mean())
+    distance = (outcome.position - task.targets[outcome.target]).norm(dim=-1)
+    return float((distance < task.success_radius).float().mean())
+
+
+@torch.no_grad()
+def follows_swapped_posteriors(task: ReachTask, policy: PredVLAPolicy, record: TrainingRecord,
+                               modules: tuple[int, ...]) -> float:
+    """Where the actions' target lives in the training posteriors: each demonstration is rolled out from its own
+    training posteriors except those of `modules` (indices into T, V, A_top, A_bottom), taken from a demonstration of
+    the next target; returns the fraction of episodes that end at that other target."""
+    sequences, which = policy.sequences, record.targets
+    model, r = policy.model, policy.config.latent_dim
+    c_q = policy.posterior_store.latents.transpose(0, 1).unflatten(-1, (4, r))  # (time, episodes, module, r)
+    donor = torch.stack([(which == (k + 1) % task.num_targets).nonzero()[0, 0] for k in which.tolist()])
+    mixed = c_q.clone()
+    mixed[:, :, list(modules)] = c_q[:, donor][:, :, list(modules)]
+    chain = model.rollout(model.initial_state(len(which)), model.language_term(sequences.language), mixed.flatten(-2))
+    position = sequences.state[:, 0]
+    for action in chain.a_hat.unbind(0):
+        position = task.move(position, action)
+    other = task.targets[which[donor]]
+    return float(((position - other).norm(dim=-1) < task.success_radius).float().mean())

@@ -223,7 +223,7 @@ class ErrorRegression:
         before = torch.stack(self.posteriors)
         c_q = before.clone().requires_grad_(True)
         plain, carried = self.config.er_optimizer == "gd", self.carries_moments
-        adam = WindowAdam(c_q, self.config.er_lr, **({
+        adam = None if plain else WindowAdam(c_q, self.config.er_lr, **({
             "exp_avg": torch.stack(self.adam_exp_avg), "exp_avg_sq": torch.stack(self.adam_exp_avg_sq),
             "rows_steps": torch.tensor(self.adam_steps)} if carried else {}))
         budget = self.config.er_deadline_ms

@@ -109,17 +109,7 @@ class PredVLAPolicy(PreTrainedPolicy):
         self.posterior_store: PosteriorStore | None = None
         if dataset_meta is not None:
             use_dataset_frontend(config, Path(dataset_meta.root))
-            self.sequences = EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats)
-            adam = config.get_optimizer_preset()
-            self.posterior_store = PosteriorStore(
-                self.sequences.vision.shape[0], config.sequence_length, self.model.posterior_dim,
-                lr=config.posterior_lr, betas=adam.betas, eps=adam.eps, moments_dtype=config.posterior_moments_dtype,
-                dense=config.posterior_adam == "dense",
-            )
-            # DDP must neither broadcast the store nor all-reduce it: `PosteriorStore.step` exchanges the batch's
-            # rows only (torch.nn.parallel.DistributedDataParallel reads this attribute of the wrapped module).
-            self._ddp_params_and_buffers_to_ignore = [f"posterior_store.{n}" for n, _ in
-                                                      self.posterior_store.named_buffers()]
+            self.train_on(EpisodeSequences.from_dataset(Path(dataset_meta.root), config, dataset_stats))
         self._write_posteriors = True
         self.corruption = ObservationCorruption.from_config(config)  # Section 4.4; None unless configured
         self.training_guard = TrainingGuard(
@@ -127,6 +117,22 @@ class PredVLAPolicy(PreTrainedPolicy):
             extra=self.posterior_store.pending_gradients if self.posterior_store is not None else None,
         )
         self.reset()
+
+    def train_on(self, sequences: EpisodeSequences) -> None:
+        """Hold the training episodes and one posterior per episode, step and module (Section 3.4), in a store
+        stepped by its own Adam (`posterior_store.py`; Table 2's posterior learning rate, the optimizer preset's
+        betas and eps). `lerobot-train` calls it through the constructor's `dataset_meta`."""
+        config, adam = self.config, self.config.get_optimizer_preset()
+        self.sequences = sequences
+        self.posterior_store = PosteriorStore(
+            sequences.vision.shape[0], config.sequence_length, self.model.posterior_dim,
+            lr=config.posterior_lr, betas=adam.betas, eps=adam.eps, moments_dtype=config.posterior_moments_dtype,
+            dense=config.posterior_adam == "dense",
+        )
+        # DDP must neither broadcast the store nor all-reduce it: `PosteriorStore.step` exchanges the batch's
+        # rows only (torch.nn.parallel.DistributedDataParallel reads this attribute of the wrapped module).
+        self._ddp_params_and_buffers_to_ignore = [f"posterior_store.{n}" for n, _ in
+                                                  self.posterior_store.named_buffers()]
 
     # ----- parameters, saving, loading -------------------------------------------------------------
     def network_parameters(self) -> list[torch.nn.Parameter]:

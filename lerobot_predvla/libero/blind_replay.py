@@ -1,0 +1,307 @@
+"""The blind-replay ceiling: one scripted-expert plan per task, replayed with no observation on other starts.
+
+For each task the scripted expert runs once from one of the benchmark's official init states (its *source*), and the
+actions it took (its *plan*) are then replayed action by action on other official init states, without looking at
+anything: `set_init_state`, the settle steps every expert episode starts with (`SETTLE_STEPS` idle steps), the plan,
+then idle steps (arm still, gripper open) up to the step cap. An episode succeeds when `env.check_success()` holds after
+any step, and ends there (as LIBERO's evaluation episodes do). What it measures is how far a policy that never looks
+can get on these starts: a lower bound, as one plan is one choice among many.
+
+Two plans per task, both chosen before any outcome is seen:
+- `state0`: the plan from official init state 0 (`--source-state`);
+- `nearest_mean`: the plan from the official init state whose object placements (x, y of every movable object after
+  `set_init_state`) are nearest, in Euclidean distance over all of them, to their mean over the task's official init
+  states. It is replayed on the same replay states, less its own source state if that is one of them (then one
+  episode fewer).
+
+Each plan is also replayed on its own source state: it must reproduce the expert's success there (a check that the
+replay is exact). Fixture poses (which resets jitter outside the simulator state) are drawn from numpy's generator
+seeded with `seed + state` before every reset, so a given state starts alike whichever plan runs on it.
+"""
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lerobot_predvla.columns import SUITES
+from lerobot_predvla.libero.protocol import PAPER_EPISODE_LENGTH, SUITE_LABELS
+from lerobot_predvla.libero.rollout import IDLE, SETTLE_STEPS
+
+PLANS = ("state0", "nearest_mean")
+NEAREST_MEAN_KEY = "nearest_mean_plan"  # report.json: the second plan's numbers, beside the state-0 plan's
+REPORT_JSON, REPORT_MD, FIGURE = "report.json", "report.md", "blind_replay.png"
+TASKS_DIR = "tasks"
+DEFAULT_OUT = Path("results/blind_replay")
+DEFAULT_STATES = tuple(range(1, 21))
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What an episode depends on; a per-task result is reused only under the same settings."""
+
+    states: tuple[int, ...] = DEFAULT_STATES
+    source_state: int = 0
+    cap: int = PAPER_EPISODE_LENGTH
+    settle_steps: int = SETTLE_STEPS
+    seed: int = 0
+    half_turn: str = "nearest"
+
+    def as_dict(self) -> dict:
+        return {"states": list(self.states), "source_state": self.source_state, "cap": self.cap,
+                "settle_steps": self.settle_steps, "seed": self.seed, "half_turn": self.half_turn}
+
+
+def task_path(out: Path, suite: str, task_id: int) -> Path:
+    return Path(out) / TASKS_DIR / suite / f"task{task_id}.json"
+
+
+def placements(env) -> np.ndarray:
+    """x, y of every movable object (LIBERO's `objects_dict`, in its order), concatenated (m)."""
+    inner = env.env
+    return np.concatenate([inner.sim.data.body_xpos[inner.obj_body_id[name]][:2] for name in inner.objects_dict])
+
+
+def nearest_mean_state(env, init_states: np.ndarray) -> dict:
+    """The official init state whose object placements are nearest their mean over all `init_states` (no outcome
+    is looked at: only the states' object positions after `set_init_state`)."""
+    env.reset()
+    rows = []
+    for state in init_states:
+        env.set_init_state(state)
+        rows.append(placements(env))
+    rows = np.asarray(rows)
+    distance = np.linalg.norm(rows - rows.mean(axis=0), axis=1)
+    best = int(np.argmin(distance))
+    return {"state": best, "distance_m": float(distance[best]), "median_distance_m": float(np.median(distance)),
+            "objects": list(env.env.objects_dict), "init_states": len(init_states)}
+
+
+def _reset(env, init_state: np.ndarray, seed: int) -> None:
+    np.random.seed(seed)  # fixture poses at reset come from numpy's global generator (env.random_reset)
+    env.reset()
+    env.set_init_state(init_state)
+
+
+def record_plan(env, init_state: np.ndarray, seed: int, settings: Settings) -> dict:
+    """The scripted expert from `init_state` (`run_episode`), its actions kept as the plan."""
+    from lerobot_predvla.libero.rollout import run_episode
+
+    assert settings.settle_steps == SETTLE_STEPS, "run_episode settles for SETTLE_STEPS"
+    np.random.seed(seed)
+    episode = run_episode(env, seed, settings.cap, settings.half_turn, init_state=init_state)
+    return {"actions": episode.actions, "success": bool(episode.success), "steps": len(episode.actions),
+            "note": episode.note}
+
+
+def replay(env, init_state: np.ndarray, actions: np.ndarray, seed: int, settings: Settings) -> int | None:
+    """`actions` then idle steps up to `settings.cap`, without observation; the step count at the first success,
+    or None."""
+    _reset(env, init_state, seed)
+    for _ in range(settings.settle_steps):
+        env.step(IDLE)
+    for t in range(settings.cap):
+        env.step(actions[t] if t < len(actions) else IDLE)
+        if env.check_success():
+            return t + 1
+    return None
+
+
+def run_task(suite: str, task_id: int, settings: Settings, progress=None) -> dict:
+    """Both plans of one task, each replayed on `settings.states` (and on its own source state); `progress` is
+    called after every episode."""
+    from lerobot_predvla.libero.env import make_env, official_init_states, task_spec
+
+    t0 = time.time()
+    spec = task_spec(suite, task_id)
+    init_states = official_init_states(suite, task_id)
+    wanted = {settings.source_state, *settings.states}
+    if max(wanted) >= len(init_states) or min(wanted) < 0:
+        raise ValueError(f"{suite} task {task_id} has {len(init_states)} official init states (0-"
+                         f"{len(init_states) - 1}); --states / --source-state ask for {sorted(wanted)}")
+    env = make_env(spec)
+    try:
+        nearest = nearest_mean_state(env, init_states)
+        sources = {"state0": settings.source_state, "nearest_mean": nearest["state"]}
+        plans = {}
+        for name, source in sources.items():
+            plan = record_plan(env, init_states[source], settings.seed + source, settings)
+            tick = progress or (lambda: None)
+            tick()
+            own = replay(env, init_states[source], plan["actions"], settings.seed + source, settings)
+            tick()
+            states = [s for s in settings.states if s != source]
+            outcomes = {}
+            for state in states:
+                outcomes[str(state)] = replay(env, init_states[state], plan["actions"], settings.seed + state, settings)
+                tick()
+            plans[name] = {
+                "source_state": source, "source_success": plan["success"], "source_steps": plan["steps"],
+                "source_note": plan["note"], "source_replay_step": own,
+                "excluded_states": [s for s in settings.states if s == source],
+                "states": states, "success_step": outcomes,
+                "successes": sum(v is not None for v in outcomes.values()), "episodes": len(outcomes),
+                "plan": plan["actions"].round(6).tolist(),
+            }
+    finally:
+        env.close()
+    return {"suite": suite, "task_id": task_id, "task_name": spec.name, "language": spec.language,
+            "settings": settings.as_dict(), "nearest_mean": nearest, "plans": plans,
+            "seconds": round(time.time() - t0, 1)}
+
+
+def episodes_per_task(settings: Settings) -> int:
+    """Episodes of one task for the progress bar: per plan a recording, its own-source replay and the replays."""
+    return len(PLANS) * (2 + len(settings.states))
+
+
+def load_task(path: Path) -> dict | None:
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+# ----- the report ---------------------------------------------------------------------------------------------
+def _entry(task: dict) -> dict:
+    first, second = task["plans"]["state0"], task["plans"]["nearest_mean"]
+
+    def numbers(plan: dict) -> dict:
+        return {"successes": plan["successes"], "episodes": plan["episodes"], "source_state": plan["source_state"],
+                "source_success": plan["source_success"], "source_replay_success": plan["source_replay_step"]
+                is not None, "plan_steps": plan["source_steps"], "excluded_states": plan["excluded_states"]}
+
+    return {**numbers(first), "task_name": task["task_name"], "states": task["settings"]["states"],
+            "cap": task["settings"]["cap"], "seconds": task["seconds"], NEAREST_MEAN_KEY: numbers(second)}
+
+
+def collect(out: Path) -> dict[str, dict[str, dict]]:
+    """report.json's content: suite -> task id -> numbers of the state-0 plan, with the nearest-mean plan's under
+    NEAREST_MEAN_KEY; from every per-task file under `out` (suites in SUITES order, tasks by id)."""
+    report = {}
+    for suite in SUITES:
+        files = sorted((Path(out) / TASKS_DIR / suite).glob("task*.json"), key=lambda p: int(p.stem[4:]))
+        tasks = {}
+        for path in files:
+            task = load_task(path)
+            if task is None:
+                raise ValueError(f"{path}: unreadable per-task result; delete it to run that task again")
+            tasks[str(task["task_id"])] = _entry(task)
+        if tasks:
+            report[suite] = tasks
+    return report
+
+
+def totals(tasks: dict[str, dict], key: str | None = None) -> tuple[int, int]:
+    rows = [t if key is None else t[key] for t in tasks.values()]
+    return sum(r["successes"] for r in rows), sum(r["episodes"] for r in rows)
+
+
+def _pct(successes: int, episodes: int) -> str:
+    return f"{100 * successes / episodes:.1f}%" if episodes else "—"
+
+
+def _states_text(states: list[int]) -> str:
+    states = sorted(states)
+    if states == list(range(states[0], states[-1] + 1)):
+        return f"{states[0]}-{states[-1]}"
+    return ", ".join(map(str, states))
+
+
+def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
+    lines = ["# One demonstration replayed blind", "",
+             "The scripted expert's plan (its actions) from one official init state of each task, replayed action by "
+             "action with no observation on other official init states: `set_init_state`, the settle steps, the "
+             "plan, then idle steps (arm still, gripper open) up to the step cap; success is LIBERO's "
+             "`check_success()` after any step. Two plans per task, both chosen before any outcome: from official "
+             "init state 0, and from the official init state whose object placements are nearest their mean over "
+             "the task's 50 official init states (that plan is not replayed on its own source state: one episode "
+             "fewer where its source is a replay state). *Own start* is each plan replayed on its source state "
+             "(must succeed wherever the expert did).", "",
+             "Reproduce:", "", "```bash", command, "```", ""]
+    for suite, tasks in report.items():
+        first = next(iter(tasks.values()))
+        s0, n0 = totals(tasks)
+        s1, n1 = totals(tasks, NEAREST_MEAN_KEY)
+        lines += [f"## {suite}", "",
+                  f"Replay states {_states_text(first['states'])}, {first['cap']}-step cap. "
+                  f"Plan from state 0: **{s0}/{n0} ({_pct(s0, n0)})**; plan from the nearest-mean state: "
+                  f"**{s1}/{n1} ({_pct(s1, n1)})**. Wall time {sum(t['seconds'] for t in tasks.values()) / 60:.0f} "
+                  "min (one process, physics only).", ""]
+        missing = expected_tasks.get(suite, 0) - len(tasks)
+        if missing > 0:
+            lines += [f"{missing} of {expected_tasks[suite]} tasks not run yet.", ""]
+        lines += ["| task | plan from state 0: successes | its steps | expert / own start | nearest-mean source "
+                  "state | its plan: successes | its steps | expert / own start | wall time (s) | name |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for task_id, t in tasks.items():
+            m = t[NEAREST_MEAN_KEY]
+
+            def ok(row: dict) -> str:
+                expert = "yes" if row["source_success"] else "**no**"
+                return f"{expert} / {'yes' if row['source_replay_success'] else 'no'}"
+
+            lines.append(f"| {task_id} | {t['successes']}/{t['episodes']} | {t['plan_steps']} | {ok(t)} | "
+                         f"{m['source_state']} | {m['successes']}/{m['episodes']} | {m['plan_steps']} | {ok(m)} | "
+                         f"{t['seconds']:.0f} | {t['task_name']} |")
+        failed = [task_id for task_id, t in tasks.items() if not t["source_success"]
+                  or not t[NEAREST_MEAN_KEY]["source_success"]]
+        if failed:
+            lines += ["", f"Tasks {', '.join(failed)}: the expert failed from a source state; its plan (what it did "
+                      "up to the cap) is replayed all the same and counted."]
+        lines.append("")
+    lines += [f"![per-task success]({FIGURE})", ""]
+    return "\n".join(lines)
+
+
+def figure(report: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lerobot_predvla.utils.io import atomic_save_figure
+
+    suites = list(report)
+    fig, axes = plt.subplots(len(suites), 1, figsize=(9, 2.6 * len(suites) + 0.6), squeeze=False)
+    for ax, suite in zip(axes[:, 0], suites, strict=True):
+        tasks = report[suite]
+        x = np.arange(len(tasks))
+        for offset, key, label in ((-0.2, None, "plan from state 0"), (0.2, NEAREST_MEAN_KEY,
+                                                                       "plan from the nearest-mean state")):
+            rows = [t if key is None else t[key] for t in tasks.values()]
+            ax.bar(x + offset, [100 * r["successes"] / max(r["episodes"], 1) for r in rows], width=0.4, label=label)
+        s0, n0 = totals(tasks)
+        s1, n1 = totals(tasks, NEAREST_MEAN_KEY)
+        ax.set_title(f"{suite}: plan from state 0 {_pct(s0, n0)} ({s0}/{n0}), from the nearest-mean state "
+                     f"{_pct(s1, n1)} ({s1}/{n1})", fontsize=10)
+        ax.set_xticks(x, list(tasks))
+        ax.set_xlim(-0.6, max(len(tasks), 10) - 0.4)
+        ax.set_ylim(0, 105)
+        ax.set_ylabel("success (%)")
+    axes[-1, 0].set_xlabel("task")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.suptitle("One demonstration replayed blind: success per task on the replay states")
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.955), ncol=2, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    atomic_save_figure(fig, path, dpi=110)
+    plt.close(fig)
+
+
+def write_report(out: Path, command: str, expected_tasks: dict[str, int]) -> dict:
+    """report.json, report.md and the figure from every per-task file under `out`."""
+    from lerobot_predvla.utils.io import atomic_write_json, atomic_write_text
+
+    report = collect(out)
+    if not report:
+        return report
+    atomic_write_json(Path(out) / REPORT_JSON, report)
+    atomic_write_text(Path(out) / REPORT_MD, markdown(report, command, expected_tasks))
+    figure(report, Path(out) / FIGURE)
+    return report
+
+
+def suite_label(suite: str) -> str:
+    return SUITE_LABELS.get(suite, suite)

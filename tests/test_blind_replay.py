@@ -1,0 +1,139 @@
+"""`predvla blind-replay`: the command run for real on tiny settings (simulator), and its reference row in the
+generated headline (no simulator)."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from lerobot_predvla.cli.main import main as predvla_main
+from lerobot_predvla.experiments import headline
+from lerobot_predvla.experiments.eval_info import parse_eval_info
+from lerobot_predvla.experiments.report import ReportError
+from lerobot_predvla.libero import blind_replay
+from lerobot_predvla.utils.io import atomic_write_json
+
+REPO = Path(__file__).resolve().parents[1]
+SUITE, TASK_ID, STATES, CAP = "libero_object", 0, (1, 2), 200
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """One task, two replay states, a short cap: the command as a user runs it."""
+    try:
+        from lerobot_predvla.libero.env import task_spec
+
+        task_spec(SUITE, TASK_ID)
+    except (RuntimeError, ImportError) as err:
+        pytest.fail(f"LIBERO is not installed: run `make libero` ({err})")
+    out = tmp_path_factory.mktemp("blind") / "blind_replay"
+    args = ["blind-replay", "--suites", SUITE, "--tasks", str(TASK_ID), "--states", ",".join(map(str, STATES)),
+            "--cap", str(CAP), "--out", str(out)]
+    assert predvla_main(args) == 0
+    return out, args
+
+
+@pytest.mark.simulator
+def test_tiny_run_writes_the_report_and_replays_each_plan_exactly_on_its_source(tiny_run):
+    out, _ = tiny_run
+    report = json.loads((out / blind_replay.REPORT_JSON).read_text())
+    assert list(report) == [SUITE] and list(report[SUITE]) == [str(TASK_ID)]
+    entry = report[SUITE][str(TASK_ID)]
+    second = entry[blind_replay.NEAREST_MEAN_KEY]
+    assert blind_replay.NEAREST_MEAN_KEY == headline.BLIND_SECOND
+    assert entry["source_state"] == 0 and entry["episodes"] == len(STATES) and entry["states"] == list(STATES)
+    assert 0 <= entry["successes"] <= entry["episodes"]
+    assert second["episodes"] == len(STATES) - len(second["excluded_states"])
+    assert set(second["excluded_states"]) <= {second["source_state"]} & set(STATES)
+
+    task = json.loads(blind_replay.task_path(out, SUITE, TASK_ID).read_text())
+    for name, plan in task["plans"].items():
+        assert plan["source_success"], f"the expert failed from the {name} plan's source: {plan['source_note']}"
+        # The plan replayed blind on its own source state is the expert's episode again: success at the same step.
+        assert plan["source_replay_step"] == plan["source_steps"] == len(plan["plan"])
+        assert plan["successes"] == sum(step is not None for step in plan["success_step"].values())
+        assert all(step is None or step <= CAP for step in plan["success_step"].values())
+    # The nearest-mean source: the state nearest the mean placement over every official init state.
+    nearest = task["nearest_mean"]
+    assert task["plans"]["nearest_mean"]["source_state"] == nearest["state"]
+    assert nearest["distance_m"] <= nearest["median_distance_m"] and nearest["init_states"] == 50
+
+    text = (out / blind_replay.REPORT_MD).read_text()
+    assert "predvla blind-replay" in text and f"{entry['successes']}/{entry['episodes']}" in text
+    assert (out / blind_replay.FIGURE).stat().st_size > 0
+
+
+@pytest.mark.simulator
+def test_a_finished_task_is_not_run_again_and_other_settings_are_refused(tiny_run, monkeypatch, capsys):
+    out, args = tiny_run
+    path = blind_replay.task_path(out, SUITE, TASK_ID)
+    before = path.read_bytes()
+
+    def never(*_, **__):
+        raise AssertionError("a finished task ran again")
+
+    monkeypatch.setattr("lerobot_predvla.cli.blind_replay.run_task", never)
+    assert predvla_main(args) == 0
+    assert path.read_bytes() == before
+    with pytest.raises(SystemExit, match="--out"):
+        predvla_main([*args[:-4], "--cap", str(CAP + 1), "--out", str(out)])
+    with pytest.raises(SystemExit, match="--source-state"):
+        predvla_main(["blind-replay", "--states", "0,1", "--out", str(out)])
+
+
+def _fake_report(tasks: int) -> dict:
+    """A blind-replay report.json of `tasks` libero_object tasks with made-up counts."""
+    entry = {}
+    for t in range(tasks):
+        second = {"successes": t, "episodes": 19 if t % 2 else 20, "source_state": 10 + t, "source_success": True,
+                  "source_replay_success": True, "plan_steps": 140, "excluded_states": [10 + t] if t % 2 else []}
+        entry[str(t)] = {"successes": 20 - t, "episodes": 20, "source_state": 0, "source_success": True,
+                         "source_replay_success": True, "plan_steps": 140, "excluded_states": [],
+                         "task_name": f"task {t}", "states": list(range(1, 21)), "cap": 600,
+                         blind_replay.NEAREST_MEAN_KEY: second}
+    return {SUITE: entry}
+
+
+def test_headline_reference_row_comes_from_the_blind_replay_report(tmp_path):
+    row_dir = "results/libero_object_cpu"
+    shutil.copytree(REPO / "configs", tmp_path / "configs")
+    shutil.copytree(REPO / row_dir / "runs/records", tmp_path / row_dir / "runs/records")
+    shutil.copytree(REPO / row_dir / "runs/eval", tmp_path / row_dir / "runs/eval")
+    shutil.copy(REPO / row_dir / "report.json", tmp_path / row_dir / "report.json")
+    (tmp_path / "docs").mkdir()
+    for name in (headline.README, headline.RESULTS_DOC):
+        (tmp_path / name).write_text(f"intro\n{headline.HEADLINE_START}\n{headline.HEADLINE_END}\nend\n")
+    headline.update_docs(tmp_path)
+    assert "replayed blind" not in (tmp_path / headline.README).read_text()
+
+    report = _fake_report(10)
+    atomic_write_json(tmp_path / "results/blind_replay/report.json", report)
+    assert len(headline.update_docs(tmp_path)) == 2
+    readme, results = (tmp_path / headline.README).read_text(), (tmp_path / headline.RESULTS_DOC).read_text()
+    s0 = sum(t["successes"] for t in report[SUITE].values())
+    n0 = sum(t["episodes"] for t in report[SUITE].values())
+    s1 = sum(t[blind_replay.NEAREST_MEAN_KEY]["successes"] for t in report[SUITE].values())
+    n1 = sum(t[blind_replay.NEAREST_MEAN_KEY]["episodes"] for t in report[SUITE].values())
+    row = next(line for line in readme.splitlines() if "one demonstration replayed blind" in line)
+    assert f"| {100 * s0 / n0:.1f} ({s0}/{n0}); from the nearest-mean start {100 * s1 / n1:.1f} ({s1}/{n1}) |" in row
+    assert "results/blind_replay/report.md" in row
+    for suite, paper in headline.PAPER_OPEN_LOOP.items():
+        assert f"| {suite} ({headline.SUITE_LABELS[suite]}) | {paper:.2f} |" in readme
+    # The detailed page: per task beside the leading row's exact open loop, counted from its eval_info files.
+    open_loop = {}
+    for path in (tmp_path / row_dir / "runs/eval/predvla_cpu_8k_open_loop").rglob("eval_info.json"):
+        for task, counts in parse_eval_info(path).items():
+            s, n = open_loop.get(task, (0, 0))
+            open_loop[task] = (s + counts["successes"], n + counts["episodes"])
+    assert open_loop
+    for task, t in report[SUITE].items():
+        second = t[blind_replay.NEAREST_MEAN_KEY]
+        s, n = open_loop[task]
+        assert (f"| {task} | {t['successes']}/{t['episodes']} | {second['successes']}/{second['episodes']} "
+                f"({second['source_state']}) | {s}/{n} |") in results
+    assert headline.update_docs(tmp_path, check=True) == []
+
+    (tmp_path / "results/blind_replay/report.json").write_text(json.dumps({SUITE: {"0": {"successes": 1}}}))
+    with pytest.raises(ReportError, match="blind_replay/report.json"):
+        headline.update_docs(tmp_path, check=True)
