@@ -51,4 +51,4 @@ synthetic-demo: install
 # LIBERO simulator: hf-libero via LeRobot's extra, assets from PyPI (no Hub), Debian GL
 # libraries, LIBERO's config.yaml in .venv/libero_config and ~/.libero. Idempotent: ~2 s when done.
 libero: install
-	$(PY) -m lerobot_predvla.libero.install
+	$(PY) -m lerobot_predvla.sims.libero.install

@@ -29,9 +29,10 @@ from torch import Tensor, nn
 from torch.utils._python_dispatch import TorchDispatchMode
 
 from benchmarks.bench_eval_memory import eval_peak_rss
+from lerobot_predvla.policies.common.losses import masked_mean
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
-from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean, training_complexity
+from lerobot_predvla.policies.predvla.modeling_predvla import training_complexity
 from lerobot_predvla.policies.predvla.posterior_store import PosteriorStore
 from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel
 from lerobot_predvla.policies.predvla.recurrence_cpp import loops, recurrence

@@ -26,7 +26,7 @@ def time_steps(render_interval: int, steps: int, seed: int) -> float:
     The mean, not the median: with sparse rendering 3 of 4 steps are physics only, so the median would hide
     the rendered ones.
     """
-    from lerobot_predvla.envs.configs import PredVLALiberoEnv
+    from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 
     cfg = PredVLALiberoEnv(task="libero_object", task_ids=[0], render_interval=render_interval)
     venv = cfg.create_envs(n_envs=1)["libero_object"][0]

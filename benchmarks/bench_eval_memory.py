@@ -86,8 +86,8 @@ def environments_only(n_envs: int, steps: int) -> None:
     import numpy as np
     from lerobot.scripts import lerobot_eval  # noqa: F401  (the imports lerobot-eval holds)
 
-    from lerobot_predvla.envs import predvla_libero  # noqa: F401  (LIBERO, robosuite, MuJoCo)
-    from lerobot_predvla.envs.configs import PredVLALiberoEnv
+    from lerobot_predvla.sims.libero import predvla_libero  # noqa: F401  (LIBERO, robosuite, MuJoCo)
+    from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 
     if n_envs == 0:
         return

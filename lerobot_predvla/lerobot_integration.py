@@ -21,10 +21,10 @@ from lerobot.scripts import lerobot_eval
 from lerobot.utils.constants import CHECKPOINTS_DIR
 
 from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM, LEROBOT_LIBERO_STATE_DIM
-from lerobot_predvla.envs.configs import PredVLALiberoEnv, fault_summary, libero_env_processors
-from lerobot_predvla.libero.config_path import use_venv_config
-from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
+from lerobot_predvla.sims.libero.config_path import use_venv_config
+from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv, fault_summary, libero_env_processors
+from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.utils.checkpoints import (
     remove_leftovers,
     save_checkpoint_atomically,
@@ -52,7 +52,7 @@ def point_libero_at_venv_config() -> bool:
 
     Replaces: hf-libero's default `~/.libero/config.yaml`, one file per user.
     Why: the last `make libero` of any checkout points that file at its own environment's assets, and once that
-    environment is gone every other checkout's simulator fails at import (libero/config_path.py).
+    environment is gone every other checkout's simulator fails at import (sims/libero/config_path.py).
     Upstream: hf-libero reading a config inside its own installation (or its package data) before `~/.libero`.
     """
     return use_venv_config()

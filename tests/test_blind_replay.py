@@ -11,7 +11,7 @@ from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.experiments import headline
 from lerobot_predvla.experiments.eval_info import parse_eval_info
 from lerobot_predvla.experiments.report import ReportError
-from lerobot_predvla.libero import blind_replay
+from lerobot_predvla.sims.libero import blind_replay
 from lerobot_predvla.utils.io import atomic_write_json
 
 REPO = Path(__file__).resolve().parents[1]
@@ -22,7 +22,7 @@ SUITE, TASK_ID, STATES, CAP = "libero_object", 0, (1, 2), 200
 def tiny_run(tmp_path_factory):
     """One task, two replay states, a short cap: the command as a user runs it."""
     try:
-        from lerobot_predvla.libero.env import task_spec
+        from lerobot_predvla.sims.libero.env import task_spec
 
         task_spec(SUITE, TASK_ID)
     except (RuntimeError, ImportError) as err:

@@ -70,15 +70,15 @@ def test_orientation_error_of_equal_and_turned_orientations():
 @pytest.fixture(scope="module")
 def demo_root(tmp_path_factory):
     try:
-        from lerobot_predvla.libero import env as env_mod
+        from lerobot_predvla.sims.libero import env as env_mod
 
         spec = env_mod.task_spec(SUITE, TASK_ID)
     except (RuntimeError, ImportError) as err:
         pytest.fail(f"LIBERO is not installed: run `make libero` ({err})")
     import robosuite.utils.transform_utils as T  # after env.py has chosen MUJOCO_GL
 
-    from lerobot_predvla.libero.hdf5_layout import OBS_KEYS, task_file, write_task_file
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.sims.libero.hdf5_layout import OBS_KEYS, task_file, write_task_file
+    from lerobot_predvla.sims.libero.rollout import run_episode
 
     env = env_mod.make_env(spec)
     demos = []

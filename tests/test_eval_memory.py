@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from lerobot_predvla.columns import SIM_CAMERAS
-from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+from lerobot_predvla.sims.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
 
 pytestmark = pytest.mark.simulator
 
@@ -26,8 +26,8 @@ def test_sub_environments_share_one_render_context_with_robosuites_pixels():
     from libero.libero.envs import OffScreenRenderEnv
     from robosuite import macros
 
-    from lerobot_predvla.envs import predvla_libero
-    from lerobot_predvla.envs.configs import PredVLALiberoEnv
+    from lerobot_predvla.sims.libero import predvla_libero
+    from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 
     cfg = PredVLALiberoEnv(task=SUITE, task_ids=[0])
     venv = cfg.create_envs(n_envs=2)[SUITE][0]
@@ -64,7 +64,7 @@ def test_a_robosuite_renderer_freed_later_leaves_the_shared_context_intact():
     from libero.libero.envs import OffScreenRenderEnv
     from robosuite import macros
 
-    from lerobot_predvla.envs.configs import PredVLALiberoEnv
+    from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 
     venv = PredVLALiberoEnv(task=SUITE, task_ids=[0]).create_envs(n_envs=1)[SUITE][0]
     venv.reset(seed=[0])
@@ -117,11 +117,11 @@ def test_the_shared_render_context_is_freed_before_exit_without_a_traceback():
     # The first atexit handler runs last: it drops the renderer after every other one ran, as a test runner's
     # teardown does (a plain script may never collect module globals at exit).
     code = ("import atexit, gc, sys\n"
-            "atexit.register(lambda: (setattr(sys.modules['lerobot_predvla.envs.predvla_libero'], 'RENDERER', None),"
-            " gc.collect()))\n"
-            "from lerobot_predvla.libero import env as _e\n"
-            "from lerobot_predvla.envs import predvla_libero\n"
-            "from lerobot_predvla.envs.configs import PredVLALiberoEnv\n"
+            "atexit.register(lambda: (setattr(sys.modules['lerobot_predvla.sims.libero.predvla_libero'], 'RENDERER',"
+            " None), gc.collect()))\n"
+            "from lerobot_predvla.sims.libero import env as _e\n"
+            "from lerobot_predvla.sims.libero import predvla_libero\n"
+            "from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv\n"
             "venv = PredVLALiberoEnv(task='libero_object', task_ids=[0]).create_envs(n_envs=1)['libero_object'][0]\n"
             "venv.reset(seed=[0])\n"
             "assert predvla_libero.RENDERER.contexts_built >= 1\n")

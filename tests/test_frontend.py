@@ -226,7 +226,7 @@ def test_fit_frontend_rejects_bad_input_without_artefact(libero_root, tmp_path, 
 def test_language_pca_on_the_libero_task_list_separates_one_task(libero_root, tmp_path):
     """Section 4.1: the language PCA is fitted on the 40 instructions of the four suites. Fitted on one task's
     demonstrations alone its features are all zero; on the task list they carry 39 directions."""
-    from lerobot_predvla.libero.env import libero_instructions
+    from lerobot_predvla.sims.libero.env import libero_instructions
 
     instructions = libero_instructions()
     assert len(set(instructions)) == 40 and INSTRUCTIONS[0] in instructions

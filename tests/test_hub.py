@@ -245,12 +245,24 @@ def test_every_policy_type_has_its_own_card_section_and_an_unknown_type_is_an_er
 
 
 def test_publishing_a_policy_loads_card_and_upload_code_only():
-    """What `PredVLAPolicy.push_to_hub` imports (hub/upload.py and hub/card.py) loads neither the experiment runners
-    nor the report."""
+    """What `PredVLAPolicy`'s publishing methods call (`PredVLAPolicy.publishing`: hub/upload.py, with hub/card.py)
+    loads neither the experiment runners nor the report."""
     code = ("import sys, lerobot_predvla.hub.upload; "
             "print(sorted(m for m in sys.modules if m.startswith('lerobot_predvla.experiments')))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert result.stdout.strip() == "[]"
+
+
+def test_generate_model_card_renders_the_plugins_card_through_the_registration():
+    """LeRobot's `generate_model_card` on a PredVLA policy renders the plugin's card with the Hub code the package's
+    registration hands the policy (`PredVLAPolicy.publishing`, hub/upload.py), which the policy never imports."""
+    import lerobot_predvla.hub.upload as upload
+
+    assert PredVLAPolicy.publishing is upload
+    checkpoint = Path(__file__).resolve().parents[1] / "checkpoints" / "predvla_libero_object"
+    card = str(PredVLAPolicy.from_pretrained(checkpoint).generate_model_card())
+    assert card.startswith("---\n") and "- predictive-coding" in card and "model_name: predvla" in card
+    assert "$" not in card and "{{" not in card
 
 
 def test_card_names_an_inference_override_that_config_json_predates():

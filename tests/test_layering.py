@@ -1,8 +1,9 @@
 """The package's shape, read from its imports with `ast`: no import cycle, no import against the layering.
 
-Parts are the top-level modules and folders of `lerobot_predvla` (a policy folder under `policies/` is a part of its
-own). `ALLOWED` lists, bottom up, the parts each part may import; `EXCEPTIONS` the imports that still run against it,
-each with its reason (the test fails once one is no longer needed, so the list only shrinks).
+Parts are the top-level modules and folders of `lerobot_predvla`; a policy folder under `policies/` and a simulator
+folder under `sims/` are parts of their own. `ALLOWED` lists, bottom up, the parts each part may import; `EXCEPTIONS`
+the imports that still run against it, each with its reason (the test fails once one is no longer needed, so the
+list only shrinks).
 """
 
 import ast
@@ -11,11 +12,13 @@ from pathlib import Path
 
 PACKAGE = "lerobot_predvla"
 ROOT = Path(__file__).resolve().parents[1] / PACKAGE
+OWN_PARTS = ("policies", "sims")  # folders whose subfolders are parts of their own
 
 _BASE = {"utils", "columns"}
 _POLICIES = {"policies", "policies.common", "policies.predvla", "policies.bc_rnn", "policies.bc_transformer",
              "policies.ladder"}
-_BELOW_SIMULATOR = _BASE | {"frontend", "data", "robots"} | _POLICIES
+_BELOW_SIMULATORS = _BASE | {"frontend", "data", "robots"} | _POLICIES
+_SIMULATORS = {"sims", "sims.libero"}
 ALLOWED = {
     "utils": set(),
     "columns": set(),  # column names and shared constants
@@ -28,24 +31,18 @@ ALLOWED = {
     "policies.bc_rnn": _BASE | {"frontend", "policies", "policies.common"},
     "policies.bc_transformer": _BASE | {"frontend", "policies", "policies.common"},
     "policies.ladder": _BASE | {"frontend", "policies", "policies.common", "policies.predvla"},  # PredVLA, cut down
-    "libero": _BASE,  # the simulator
-    "envs": _BASE | {"libero", "policies.common"},
-    "hub": _BELOW_SIMULATOR | {"libero"},
-    "lerobot_integration": _BELOW_SIMULATOR | {"libero", "envs"},
-    "experiments": _BELOW_SIMULATOR | {"libero", "envs", "hub"},
-    "cli": _BELOW_SIMULATOR | {"libero", "envs", "hub", "experiments"},
+    "sims": set(),  # one folder per simulator, nothing of its own
+    "sims.libero": _BASE | {"policies.common"},  # the simulator and its LeRobot env type
+    "hub": _BELOW_SIMULATORS | _SIMULATORS,
+    "lerobot_integration": _BELOW_SIMULATORS | _SIMULATORS,
+    "experiments": _BELOW_SIMULATORS | _SIMULATORS | {"hub"},
+    "cli": _BELOW_SIMULATORS | _SIMULATORS | {"hub", "experiments"},
 }
 # (importing module, imported part): why the import runs against ALLOWED for now.
-EXCEPTIONS = {
-    # push_to_hub, push_model_to_hub and generate_model_card are LeRobot's methods of the policy: they reach the hub
-    # from inside the functions.
-    ("policies.predvla.modeling_predvla", "hub"): "LeRobot's publishing methods live on the policy",
-    # The mixture head and the masks every baseline shares are still defined in PredVLA's folder.
-    ("policies.bc_rnn.modeling_predvla_bc_rnn", "policies.predvla"): "GMMActionHead, masked_mean",
-    ("policies.bc_transformer.modeling_predvla_bc_transformer", "policies.predvla"): "GMMActionHead, masked_mean",
-}
-# Function-level imports of the package's own modules (each says why it waits for its call).
-MAX_FUNCTION_LEVEL_IMPORTS = 9
+EXCEPTIONS: dict[tuple[str, str], str] = {}
+# Function-level imports of the package's own modules: each waits for an optional heavy dependency (the simulator:
+# LIBERO, robosuite, MuJoCo) and says so.
+MAX_FUNCTION_LEVEL_IMPORTS = 5
 
 
 def module_name(path: Path) -> str:
@@ -54,11 +51,12 @@ def module_name(path: Path) -> str:
 
 
 def part_of(module: str) -> str:
-    """`lerobot_predvla.policies.predvla.x` -> `policies.predvla`; `lerobot_predvla.hub.card` -> `hub`; the
-    package's own `__init__` (the registration, which imports every part) -> ``."""
+    """`lerobot_predvla.policies.predvla.x` -> `policies.predvla`; `lerobot_predvla.sims.libero.x` ->
+    `sims.libero`; `lerobot_predvla.hub.card` -> `hub`; the package's own `__init__` (the registration, which
+    imports every part) -> ``."""
     names = module.split(".")[1:]
-    if len(names) > 1 and names[0] == "policies" and (ROOT / "policies" / names[1]).is_dir():
-        return f"policies.{names[1]}"
+    if len(names) > 1 and names[0] in OWN_PARTS and (ROOT / names[0] / names[1]).is_dir():
+        return f"{names[0]}.{names[1]}"
     return names[0] if names else ""
 
 

@@ -291,7 +291,7 @@ def test_state_processor_follows_the_policys_state():
     from lerobot.envs.configs import LiberoEnv
     from lerobot.processor.env_processor import LiberoProcessorStep
 
-    from lerobot_predvla.envs.configs import PredVLALiberoEnv, PredVLALiberoProcessorStep
+    from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv, PredVLALiberoProcessorStep
 
     env = LiberoEnv(task="libero_object", task_ids=[0])
     steps = {dim: make_env_pre_post_processors(env, PredVLAConfig(proprio_dim=dim))[0].steps for dim in (8, 9)}

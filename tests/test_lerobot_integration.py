@@ -35,7 +35,7 @@ import lerobot.envs, lerobot.envs.factory
 from lerobot.scripts import lerobot_eval
 import lerobot_predvla
 from lerobot_predvla import lerobot_integration as li
-from lerobot_predvla.libero.config_path import CONFIG_NAME, VENV_CONFIG_DIR
+from lerobot_predvla.sims.libero.config_path import CONFIG_NAME, VENV_CONFIG_DIR
 li.install()  # a second call changes nothing
 assert lerobot.envs.make_env_pre_post_processors is li.make_env_pre_post_processors
 assert lerobot.envs.factory.make_env_pre_post_processors is li.make_env_pre_post_processors

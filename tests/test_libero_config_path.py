@@ -4,7 +4,13 @@ import os
 import subprocess
 import sys
 
-from lerobot_predvla.libero.config_path import CONFIG_ENV, CONFIG_NAME, VENV_CONFIG_DIR, active_config, use_venv_config
+from lerobot_predvla.sims.libero.config_path import (
+    CONFIG_ENV,
+    CONFIG_NAME,
+    VENV_CONFIG_DIR,
+    active_config,
+    use_venv_config,
+)
 
 
 def test_the_venv_config_is_used_unless_the_user_chose_one(tmp_path, monkeypatch):

@@ -22,8 +22,8 @@ SUITE, TASK_ID, SEED = "libero_object", 0, 7
 @pytest.fixture(scope="module")
 def libero():
     try:
-        from lerobot_predvla.libero import env
-        from lerobot_predvla.libero.env import task_spec
+        from lerobot_predvla.sims.libero import env
+        from lerobot_predvla.sims.libero.env import task_spec
 
         spec = task_spec(SUITE, TASK_ID)
     except (RuntimeError, ImportError) as err:
@@ -33,9 +33,9 @@ def libero():
 
 def test_expert_episode_to_hdf5(libero, tmp_path):
     env_mod, spec = libero
-    from lerobot_predvla.libero.hdf5_layout import check_task_file, file_attrs, task_file, write_task_file
-    from lerobot_predvla.libero.render import replay_observations
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.sims.libero.hdf5_layout import check_task_file, file_attrs, task_file, write_task_file
+    from lerobot_predvla.sims.libero.render import replay_observations
+    from lerobot_predvla.sims.libero.rollout import run_episode
 
     env = env_mod.make_env(spec)
     episode = run_episode(env, seed=SEED, max_steps=280)
@@ -94,7 +94,7 @@ def test_initial_joint_noise_spreads_the_arm_like_the_official_init_states(liber
     """`init_noise` = robosuite's default starts the arm as the benchmark's init states do; 0 is one fixed pose;
     the seed fixes the noise. Objects are placed alike either way."""
     env_mod, spec = libero
-    from lerobot_predvla.libero.start_spread import start_spread
+    from lerobot_predvla.sims.libero.start_spread import start_spread
 
     fixed = start_spread(SUITE, TASK_ID, n=10, init_noise=0.0)
     noisy = start_spread(SUITE, TASK_ID, n=10, init_noise=env_mod.OFFICIAL_INIT_NOISE)
@@ -113,15 +113,15 @@ def test_initial_joint_noise_spreads_the_arm_like_the_official_init_states(liber
 
 
 def test_a_stale_config_names_the_file_and_key(tmp_path, monkeypatch):
-    from lerobot_predvla.libero.env import task_spec
+    from lerobot_predvla.sims.libero.env import task_spec
 
     (tmp_path / "config.yaml").write_text(f"bddl_files: {tmp_path / 'gone'}\n")
     monkeypatch.setenv("LIBERO_CONFIG_PATH", str(tmp_path))
     with pytest.raises(RuntimeError, match=r"config.yaml: `bddl_files` is .*gone.*make libero"):
         task_spec(SUITE, TASK_ID)
     # The eval env (what lerobot-eval imports) checks it too, before LIBERO reads it deep inside a reset.
-    out = subprocess.run([sys.executable, "-c", "import lerobot_predvla.envs.predvla_libero"], capture_output=True,
-                         text=True, env={**os.environ, "LIBERO_CONFIG_PATH": str(tmp_path)})
+    out = subprocess.run([sys.executable, "-c", "import lerobot_predvla.sims.libero.predvla_libero"],
+                         capture_output=True, text=True, env={**os.environ, "LIBERO_CONFIG_PATH": str(tmp_path)})
     assert out.returncode != 0
     assert re.search(r"config.yaml: `bddl_files` is .*gone.*make libero", out.stderr.splitlines()[-1])
 
@@ -130,7 +130,7 @@ def test_wrist_centre_half_turn_keeps_one_wrist_branch_under_start_noise(libero)
     """Salad dressing with the official init states' arm noise: the 'nearest' half turn lets the start noise pick
     the wrist branch (two resets end half a turn apart); 'wrist_centre' ends both on one branch. All succeed."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.sims.libero.rollout import run_episode
 
     env = env_mod.make_env(env_mod.task_spec(SUITE, 2), init_noise=env_mod.OFFICIAL_INIT_NOISE)
     wrist = env.env.robots[0].robot_joints[-1]
@@ -148,7 +148,7 @@ def test_wrist_centre_half_turn_keeps_one_wrist_branch_under_start_noise(libero)
 def test_hold_steps_record_the_arm_waiting_after_success(libero):
     """`--hold-steps`: the same episode, then idle steps (arm still, gripper open) with the object staying put."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.rollout import IDLE, run_episode
+    from lerobot_predvla.sims.libero.rollout import IDLE, run_episode
 
     env = env_mod.make_env(env_mod.task_spec(SUITE, 0))
     plain = run_episode(env, 1000, max_steps=280)
@@ -164,7 +164,7 @@ def test_expert_success_from_the_official_init_states(libero):
     """`predvla demos --no-render --official-init-states` measures the expert where the policies are evaluated:
     attempt k starts from official init state k (the arm's joint noise included). Recording from them is refused."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.sims.libero.rollout import run_episode
 
     cli = [sys.executable, "-m", "lerobot_predvla.cli.main", "demos", "--suite", SUITE, "--tasks", "2",
            "--per-task", "2", "--max-attempts", "2", "--official-init-states"]
@@ -192,7 +192,7 @@ def test_expert_success_from_the_official_init_states(libero):
 def test_expert_turns_on_the_stove(libero):
     """An articulated goal (`Turnon`): the knob is grasped and twisted from a randomised reset, physics only."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.sims.libero.rollout import run_episode
 
     env = env_mod.make_env(env_mod.task_spec("libero_goal", 7))  # turn_on_the_stove
     episode = run_episode(env, seed=3, max_steps=300)
@@ -205,8 +205,8 @@ def test_expert_pushes_the_plate_around_the_cream_cheese(libero):
     """A flat object is pushed, not picked, along an L-shaped path that keeps the plate clear of the cream
     cheese standing between it and the stove's front region, then into that region (physics only)."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.expert import ScriptedExpert
-    from lerobot_predvla.libero.rollout import IDLE, SETTLE_STEPS, run_episode
+    from lerobot_predvla.sims.libero.expert import ScriptedExpert
+    from lerobot_predvla.sims.libero.rollout import IDLE, SETTLE_STEPS, run_episode
 
     env = env_mod.make_env(env_mod.task_spec("libero_goal", 5))  # push_the_plate_to_the_front_of_the_stove
     env_mod.random_reset(env, 1)
@@ -225,8 +225,8 @@ def test_expert_leans_its_rim_grasp_under_the_open_drawer(libero):
     """Open the top drawer, then put the bowl inside: the open drawer overhangs the bowl, so the rim grasp
     leans along the rim to keep the hand off it (upright, the hand hits the drawer: 1/10 before the lean)."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.expert import ScriptedExpert
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.sims.libero.expert import ScriptedExpert
+    from lerobot_predvla.sims.libero.rollout import run_episode
 
     env = env_mod.make_env(env_mod.task_spec("libero_goal", 3))  # open_the_top_drawer_and_put_the_bowl_inside
     env_mod.random_reset(env, 2)
@@ -247,8 +247,8 @@ def test_expert_swings_the_microwave_door_shut(libero):
     """A hinged door's `Close` (libero_10 task 9's second predicate): the door is pushed round its hinge
     from the trailing face until LIBERO's own predicate holds."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.expert import ScriptedExpert
-    from lerobot_predvla.libero.rollout import IDLE, SETTLE_STEPS
+    from lerobot_predvla.sims.libero.expert import ScriptedExpert
+    from lerobot_predvla.sims.libero.rollout import IDLE, SETTLE_STEPS
 
     env = env_mod.make_env(env_mod.task_spec("libero_10", 9))  # ..._mug_in_the_microwave_and_close_it
     env_mod.random_reset(env, 0)
@@ -269,8 +269,8 @@ def test_expert_grasps_a_moka_pot_by_its_handle(libero):
     """A wide object with a thin part reaching out (a moka pot's handle) is grasped there, fingers across it;
     a bowl has no handle and keeps the rim grasp. Then the pot is picked and put on the stove."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.expert import ScriptedExpert
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.sims.libero.expert import ScriptedExpert
+    from lerobot_predvla.sims.libero.rollout import run_episode
 
     bowl_env = env_mod.make_env(env_mod.task_spec("libero_goal", 1))  # put_the_bowl_on_the_stove
     env_mod.random_reset(bowl_env, 0)
@@ -295,8 +295,8 @@ def test_expert_puts_each_mug_on_its_plate_by_body_origin(libero):
     tilted, its box centre ~2 cm off its origin (at its bottom): the origin is carried over the plate's
     (0/10 when box centres were aligned)."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.expert import ScriptedExpert
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.sims.libero.expert import ScriptedExpert
+    from lerobot_predvla.sims.libero.rollout import run_episode
 
     env = env_mod.make_env(env_mod.task_spec("libero_10", 4))  # white mug on the left plate, yellow one right
     env_mod.random_reset(env, 0)
@@ -314,8 +314,8 @@ def test_expert_puts_the_bowl_in_the_bottom_drawer_and_pushes_it_shut(libero):
     the drawer is pushed shut by its handle (0/10 before, grasping the sideways handle to close it; 9/10 with the
     push alone, the bowl dropped from higher up landing tilted once and jamming the drawer)."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.expert import ScriptedExpert
-    from lerobot_predvla.libero.rollout import IDLE, SETTLE_STEPS, run_episode
+    from lerobot_predvla.sims.libero.expert import ScriptedExpert
+    from lerobot_predvla.sims.libero.rollout import IDLE, SETTLE_STEPS, run_episode
 
     env = env_mod.make_env(env_mod.task_spec("libero_10", 3))  # ..._black_bowl_in_the_bottom_drawer_..._and_close_it
     env_mod.random_reset(env, 0)
@@ -337,8 +337,8 @@ def test_expert_slides_the_mug_into_the_microwave(libero):
     the mug is grasped by its handle, which faces the open side, the gripper leaning back to keep the hand
     outside, then slid in just above the floor; the door is swung shut afterwards."""
     env_mod, _ = libero
-    from lerobot_predvla.libero.expert import ScriptedExpert
-    from lerobot_predvla.libero.rollout import run_episode
+    from lerobot_predvla.sims.libero.expert import ScriptedExpert
+    from lerobot_predvla.sims.libero.rollout import run_episode
 
     env = env_mod.make_env(env_mod.task_spec("libero_10", 9))  # ..._mug_in_the_microwave_and_close_it
     env_mod.random_reset(env, 0)
@@ -357,8 +357,8 @@ def test_demo_start_spread_reads_the_demonstrations_first_states(libero, tmp_pat
     """Demonstrations that start exactly at the official init states spread exactly as those do; a missing task file
     is named."""
     env_mod, spec = libero
-    from lerobot_predvla.libero.hdf5_layout import task_file
-    from lerobot_predvla.libero.start_spread import demo_start_spread, main
+    from lerobot_predvla.sims.libero.hdf5_layout import task_file
+    from lerobot_predvla.sims.libero.start_spread import demo_start_spread, main
 
     path = task_file(tmp_path, spec)
     path.parent.mkdir(parents=True)

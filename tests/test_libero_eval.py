@@ -136,8 +136,8 @@ def test_predvla_libero_env_observations():
     """Fresh images every 4th step equal the demonstrations' render of the same state; proprio is joints+gripper."""
     from lerobot.envs.utils import preprocess_observation
 
-    from lerobot_predvla.envs.configs import PredVLALiberoEnv
-    from lerobot_predvla.libero import env as libero_env  # first: headless MUJOCO_GL
+    from lerobot_predvla.sims.libero import env as libero_env  # first: headless MUJOCO_GL
+    from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 
     cfg = PredVLALiberoEnv(task=SUITE, task_ids=[0])
     venv = cfg.create_envs(n_envs=1)[SUITE][0]
@@ -177,8 +177,8 @@ def test_lerobots_libero_env_gives_predvla_joint_proprio():
     from lerobot.policies.act.configuration_act import ACTConfig
 
     from lerobot_predvla import PredVLAConfig
-    from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
     from lerobot_predvla.policies.bc_rnn.configuration_predvla_bc_rnn import PredVLABCRNNConfig
+    from lerobot_predvla.sims.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
 
     cfg = LiberoEnv(task=SUITE, task_ids=[0], observation_height=128, observation_width=128)
     venv = make_env(cfg, n_envs=1)[SUITE][0]
@@ -232,8 +232,8 @@ def test_step_caps_are_lerobots():
     from lerobot.envs.libero import TASK_SUITE_MAX_STEPS
 
     from lerobot_predvla.columns import SUITES
-    from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
-    from lerobot_predvla.libero.protocol import STEP_CAPS
+    from lerobot_predvla.sims.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+    from lerobot_predvla.sims.libero.protocol import STEP_CAPS
 
     assert set(STEP_CAPS) == set(SUITES)
     assert {suite: TASK_SUITE_MAX_STEPS[suite] for suite in SUITES} == STEP_CAPS

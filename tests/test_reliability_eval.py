@@ -11,9 +11,9 @@ from lerobot.processor import PolicyProcessorPipeline
 from test_libero_eval import BIN, EPISODE_STEPS, SOUP, SUITE, checkpoint, run  # noqa: F401  (module fixture)
 
 from lerobot_predvla.columns import OBS_VISION_FEATURES
-from lerobot_predvla.envs.fault_injection import FaultInjectionStep
 from lerobot_predvla.frontend import FrozenFrontend
 from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
+from lerobot_predvla.sims.libero.fault_injection import FaultInjectionStep
 
 pytestmark = [pytest.mark.simulator, pytest.mark.slow]
 

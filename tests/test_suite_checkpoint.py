@@ -17,8 +17,8 @@ def test_suite_checkpoint_loads_with_make_policy_and_acts_on_libero():
     from lerobot.envs.utils import preprocess_observation
     from lerobot.policies.factory import make_policy, make_pre_post_processors
 
-    from lerobot_predvla.envs.configs import PredVLALiberoEnv
-    from lerobot_predvla.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+    from lerobot_predvla.sims.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+    from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 
     assert not (CHECKPOINT / "posterior_store.safetensors").exists()  # training posteriors are never shipped
     config = PreTrainedConfig.from_pretrained(CHECKPOINT)

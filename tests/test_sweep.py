@@ -551,8 +551,8 @@ class FakeData(FakeLeRobot):
         stage = command[command.index("lerobot_predvla.cli.main") + 1]
         value = dict(zip(command, command[1:], strict=False))
         if stage == "demos":
-            from lerobot_predvla.libero.env import task_spec
-            from lerobot_predvla.libero.hdf5_layout import task_file
+            from lerobot_predvla.sims.libero.env import task_spec
+            from lerobot_predvla.sims.libero.hdf5_layout import task_file
 
             for task in value["--tasks"].split(","):
                 path = task_file(Path(value["--out"]), task_spec(value["--suite"], int(task)))
@@ -575,8 +575,8 @@ def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
     path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], data=data,
                       eval={"device": "cpu", "tasks": [0, 1], "n_episodes": 4})
     runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FakeData())
-    from lerobot_predvla.libero.env import task_spec
-    from lerobot_predvla.libero.hdf5_layout import task_file
+    from lerobot_predvla.sims.libero.env import task_spec
+    from lerobot_predvla.sims.libero.hdf5_layout import task_file
 
     done_task = task_file(tmp_path / "out/hdf5", task_spec("libero_object", 1))  # a killed demos run left task 1
     done_task.parent.mkdir(parents=True)
@@ -633,8 +633,8 @@ def test_demonstrations_split_across_data_workers(tmp_path):
     data = {"libero_object": {"hdf5": "out/hdf5", "frontend": "out/frontend", "per_task": 3, "tasks": [0, 1, 2, 3],
                               "vision_weights": "random", "workers": 2}}
     path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], data=data)
-    from lerobot_predvla.libero.env import task_spec
-    from lerobot_predvla.libero.hdf5_layout import task_file
+    from lerobot_predvla.sims.libero.env import task_spec
+    from lerobot_predvla.sims.libero.hdf5_layout import task_file
 
     done_task = task_file(tmp_path / "out/hdf5", task_spec("libero_object", 1))
     done_task.parent.mkdir(parents=True)

@@ -17,8 +17,23 @@ import sys
 import time
 from pathlib import Path
 
+from tqdm import tqdm
+
 from lerobot_predvla.columns import SUITES
-from lerobot_predvla.libero.protocol import PAPER_EPISODE_LENGTH
+from lerobot_predvla.sims.libero.blind_replay import (
+    DEFAULT_OUT,
+    DEFAULT_STATES,
+    Settings,
+    episodes_per_task,
+    load_task,
+    run_task,
+    task_path,
+    write_report,
+)
+from lerobot_predvla.sims.libero.env import num_tasks
+from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
+from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH
+from lerobot_predvla.utils.io import atomic_write_json
 
 
 def _ints(flag: str):
@@ -56,9 +71,6 @@ def _suites(text: str) -> list[str]:
 
 
 def add_parser(subparsers) -> None:
-    from lerobot_predvla.libero.blind_replay import DEFAULT_OUT
-    from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
-
     p = subparsers.add_parser("blind-replay", help="replay one scripted-expert plan per task without observations",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--suites", type=_suites, default=list(SUITES), help="comma-separated (default: all four)")
@@ -78,8 +90,6 @@ def add_parser(subparsers) -> None:
 
 
 def command_line(args: argparse.Namespace) -> str:
-    from lerobot_predvla.libero.blind_replay import DEFAULT_OUT, DEFAULT_STATES
-
     words = ["predvla", "blind-replay"]
     if args.suites != list(SUITES):
         words += ["--suites", ",".join(args.suites)]
@@ -99,19 +109,6 @@ def command_line(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
-    from lerobot_predvla.libero.blind_replay import (
-        DEFAULT_STATES,
-        Settings,
-        episodes_per_task,
-        load_task,
-        task_path,
-        write_report,
-    )
-    from lerobot_predvla.libero.env import num_tasks
-    from lerobot_predvla.utils.io import atomic_write_json
-
     states = tuple(args.states) if args.states is not None else DEFAULT_STATES
     if args.cap < 1:
         raise SystemExit(f"--cap must be >= 1, got {args.cap}")
@@ -159,12 +156,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_task(*args, **kwargs):
-    from lerobot_predvla.libero.blind_replay import run_task as _run_task
-
-    return _run_task(*args, **kwargs)
-
-
 def command_for_report(args: argparse.Namespace) -> str:
     """The command that reproduces the whole report: every suite, every task, under these settings."""
     full = argparse.Namespace(**{**vars(args), "suites": list(SUITES), "tasks": None})
@@ -172,6 +163,4 @@ def command_for_report(args: argparse.Namespace) -> str:
 
 
 def expected_all() -> dict[str, int]:
-    from lerobot_predvla.libero.env import num_tasks
-
     return {suite: num_tasks(suite) for suite in SUITES}

@@ -8,7 +8,8 @@ their 128x128 images are rendered afterwards by replaying the saved states.
 import argparse
 from pathlib import Path
 
-from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
+from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
+from lerobot_predvla.sims.libero.record import record_demos
 
 
 def task_ids(text: str) -> list[int]:
@@ -54,6 +55,4 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lerobot_predvla.libero.record import record_demos  # the simulator's modules: libero.env sets MUJOCO_GL
-
     return record_demos(args)

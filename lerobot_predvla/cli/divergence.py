@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from lerobot_predvla.cli.demos import task_ids
+from lerobot_predvla.experiments.divergence_report import run as run_divergence
 
 
 def add_parser(subparsers) -> None:
@@ -42,8 +43,6 @@ def run(args: argparse.Namespace) -> int:
     if not (args.checkpoint / "config.json").is_file():
         print(f"predvla divergence: error: {args.checkpoint}: no config.json", file=sys.stderr)
         return 2
-    from lerobot_predvla.experiments.divergence import run as run_divergence
-
     run_divergence(args.checkpoint, args.hdf5_root, args.tasks, args.demos, args.cap, args.out, args.suite,
                    merge=args.merge)
     print(f"wrote {args.out / 'divergence.json'} and task figures to {args.out}")

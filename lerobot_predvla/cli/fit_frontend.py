@@ -11,6 +11,7 @@ from lerobot_predvla.data.fitting import FitFrontendConfig, fit_frontend, varian
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import PRECISIONS, VisionWeights, VisionWeightsError
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.sims.libero.env import libero_instructions
 
 CONFIG_DEFAULTS = {f.name: f.default for f in fields(PredVLAConfig)}
 # Errors that are the user's input, reported in one line with a non-zero exit.
@@ -56,8 +57,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def _language_instructions(source: str) -> tuple[str, ...] | None:
     if source == "demos":
         return None
-    from lerobot_predvla.libero.env import libero_instructions  # the simulator's tasks (sets MUJOCO_GL)
-
     return libero_instructions()
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from lerobot_predvla.cli.demos import task_ids
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, success_rates
-from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
+from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.utils.checkpoints import last_pretrained
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json
 

@@ -1,7 +1,7 @@
 """A table of fault-injection evaluations: `python -m lerobot_predvla.experiments.faults EVAL_INFO.json ...`.
 
 Each file is the `eval_info.json` of a `lerobot-eval --env.type=predvla_libero --env.fault_rate=x` run; its
-`predvla_faults` section (written by `lerobot_predvla.envs`) holds the injected faults, the observation steps
+`predvla_faults` section (written by `lerobot_predvla.sims.libero`) holds the injected faults, the observation steps
 the policy masked out of the free energy and the count of non-finite actions. Prints one Markdown row per file,
 clean runs (no injection) first.
 """

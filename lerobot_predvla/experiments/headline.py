@@ -28,13 +28,13 @@ from lerobot_predvla.columns import SUITES
 from lerobot_predvla.experiments.report import MISSING, SUMMARY_FILE, ReportError, run_episodes
 from lerobot_predvla.experiments.sweep import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
 from lerobot_predvla.hub.upload import repository_files, shipped_checkpoints
-from lerobot_predvla.libero.protocol import (
+from lerobot_predvla.policies.recipe import config_departures
+from lerobot_predvla.sims.libero.protocol import (
     PAPER_EPISODE_LENGTH,
     PAPER_EPISODES_PER_TASK,
     PAPER_OBJECT,
     SUITE_LABELS,
 )
-from lerobot_predvla.policies.recipe import config_departures
 from lerobot_predvla.utils.io import atomic_write_bytes
 from lerobot_predvla.utils.manifest import MANIFEST_FILE, listed_files, manifest_text
 
@@ -51,7 +51,7 @@ BASELINE_COLUMNS = ("bc_rnn", "bc_transformer")
 # The paper's exact open loop (Table 6, A6) per suite, beside one demonstration replayed blind.
 PAPER_OPEN_LOOP = {"libero_spatial": 73.79, "libero_object": 78.14, "libero_goal": 78.50, "libero_10": 28.00}
 BLIND_REPLAY = "blind_replay"  # results/blind_replay/report.json, written by `predvla blind-replay`
-BLIND_SECOND = "nearest_mean_plan"  # its second plan's key (lerobot_predvla.libero.blind_replay.NEAREST_MEAN_KEY)
+BLIND_SECOND = "nearest_mean_plan"  # its second plan's key (lerobot_predvla.sims.libero.blind_replay.NEAREST_MEAN_KEY)
 
 
 @dataclass(frozen=True)

@@ -38,8 +38,8 @@ from lerobot_predvla.experiments.lr_selection import (
     pending_selections,
 )
 from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE, eval_run_dir, run_log_path
-from lerobot_predvla.libero.protocol import SHORT_SUITES, SUITE_LABELS
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
+from lerobot_predvla.sims.libero.protocol import SHORT_SUITES, SUITE_LABELS
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
 SUMMARY_FILE = "report.json"
@@ -62,7 +62,8 @@ PUBLISHED_REFERENCES = (
 PARAMETERLESS_REFERENCES = (("Diffusion Policy", 72.4),)  # its parameter count is not given with the result
 MISSING = "—"
 NOT_RUN = "not run yet"  # a learning-rate candidate of a sweep still running
-START_SPREAD_FILE = "start_spread.json"  # beside the report: `python -m lerobot_predvla.libero.start_spread --demos`
+# beside the report: `python -m lerobot_predvla.sims.libero.start_spread --demos`
+START_SPREAD_FILE = "start_spread.json"
 INSPECT_DIR = "inspect"  # beside the report: inspect/seed<N>/ from `predvla inspect <train dir> --every N`
 CURVES_FIGURE = "training_curves.png"
 

@@ -42,9 +42,9 @@ from lerobot_predvla.experiments.lr_selection import (
     heldout_losses,
     selection_path,
 )
-from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
-from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK
 from lerobot_predvla.policies.recipe import NOT_RECIPE
+from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
+from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK
 from lerobot_predvla.utils.checkpoints import last_pretrained, prune_checkpoints
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.manifest import sha256_file
@@ -683,8 +683,8 @@ class Runner:
 
     @staticmethod
     def missing_demo_tasks(suite: str, spec: DataSpec, hdf5: Path) -> list[int]:
-        from lerobot_predvla.libero.env import num_tasks, task_spec  # the simulator's tasks (sets MUJOCO_GL)
-        from lerobot_predvla.libero.hdf5_layout import task_file  # imports libero.env
+        from lerobot_predvla.sims.libero.env import num_tasks, task_spec  # the simulator's tasks (sets MUJOCO_GL)
+        from lerobot_predvla.sims.libero.hdf5_layout import task_file  # imports libero.env
 
         tasks = spec.tasks if spec.tasks is not None else range(num_tasks(suite))
         return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]

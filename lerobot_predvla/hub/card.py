@@ -20,10 +20,15 @@ from lerobot.utils.constants import POLICY_PREPROCESSOR_DEFAULT_NAME
 
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.frontend.artefact import METADATA_FILE
-from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK, PAPER_OBJECT
 from lerobot_predvla.policies import POLICY_TYPES
 from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PREDICTIVE_RUNGS
 from lerobot_predvla.policies.recipe import NOT_RECIPE, config_defaults, config_departures, differs
+from lerobot_predvla.sims.libero.protocol import (
+    EVAL_ENV_TYPE,
+    PAPER_EPISODE_LENGTH,
+    PAPER_EPISODES_PER_TASK,
+    PAPER_OBJECT,
+)
 from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.versions import package_version
 

@@ -214,6 +214,16 @@ def push_checkpoint(
     return published, upload_files(published, repo_id, private, "Upload PredVLA policy, processors, front end, card")
 
 
+def policy_card(policy, repo_id: str, *, cfg=None, dataset_meta=None) -> str:
+    """The card of an in-memory policy (`PredVLAPolicy.generate_model_card`), from its saved files."""
+    with tempfile.TemporaryDirectory() as tmp:
+        policy.save_pretrained(Path(tmp))
+        if cfg is not None:
+            cfg.save_pretrained(Path(tmp))
+        dataset = DatasetSummary.from_meta(dataset_meta) if dataset_meta is not None else None
+        return render_card(without_machine_paths(publishable_files(Path(tmp))), repo_id, dataset)
+
+
 def push_policy(
     policy, repo_id: str, *, cfg=None, state_dict=None, dataset_meta=None, private: bool | None = None
 ) -> str:

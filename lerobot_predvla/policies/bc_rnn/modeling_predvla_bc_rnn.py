@@ -3,9 +3,9 @@
 from torch import Tensor, nn
 
 from lerobot_predvla.policies.bc_rnn.configuration_predvla_bc_rnn import BC_RNN_PAPER_PARAMETERS, PredVLABCRNNConfig
+from lerobot_predvla.policies.common.action_head import GMMActionHead
+from lerobot_predvla.policies.common.losses import masked_mean
 from lerobot_predvla.policies.common.observation_policy import ObservationPolicy, observation_inputs
-from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean
-from lerobot_predvla.policies.predvla.predictive_model import GMMActionHead
 
 
 class PredVLABCRNNPolicy(ObservationPolicy):

@@ -8,9 +8,9 @@ from lerobot_predvla.policies.bc_transformer.configuration_predvla_bc_transforme
     BC_TRANSFORMER_PAPER_PARAMETERS,
     PredVLABCTransformerConfig,
 )
+from lerobot_predvla.policies.common.action_head import GMMActionHead
+from lerobot_predvla.policies.common.losses import masked_mean
 from lerobot_predvla.policies.common.observation_policy import ObservationPolicy, observation_inputs
-from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean
-from lerobot_predvla.policies.predvla.predictive_model import GMMActionHead
 
 
 class PredVLABCTransformerPolicy(ObservationPolicy):

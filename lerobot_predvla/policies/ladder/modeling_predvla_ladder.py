@@ -5,14 +5,16 @@ from typing import NamedTuple
 import torch
 from torch import Tensor, nn
 
+from lerobot_predvla.policies.common.action_head import GMMActionHead, mlp
+from lerobot_predvla.policies.common.losses import masked_mean
 from lerobot_predvla.policies.common.observation_policy import ObservationPolicy
 from lerobot_predvla.policies.ladder.configuration_predvla_ladder import (
     LADDER_PAPER_PARAMETERS,
     LADDER_WIDTHS,
     PredVLALadderConfig,
 )
-from lerobot_predvla.policies.predvla.modeling_predvla import masked_mean, refresh_mask
-from lerobot_predvla.policies.predvla.predictive_model import GMMActionHead, PredictiveModel, RecurrentState, mlp
+from lerobot_predvla.policies.predvla.modeling_predvla import refresh_mask
+from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel, RecurrentState
 
 
 class LadderCell(nn.Module):

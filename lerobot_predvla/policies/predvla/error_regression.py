@@ -26,7 +26,8 @@ from typing import ClassVar
 import torch
 from torch import Tensor
 
-from lerobot_predvla.policies.predvla.predictive_model import GMMActionHead, PredictiveModel, RecurrentState, Trajectory
+from lerobot_predvla.policies.common.action_head import GMMActionHead
+from lerobot_predvla.policies.predvla.predictive_model import PredictiveModel, RecurrentState, Trajectory
 
 
 @contextmanager

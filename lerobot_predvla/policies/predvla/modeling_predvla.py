@@ -1,11 +1,12 @@
 """PredVLA policy for LeRobot: training with per-episode posteriors (Eq. 10), acting by error regression."""
 
 import logging
-import tempfile
 import time
 from pathlib import Path
+from typing import ClassVar, Protocol
 
 import torch
+from huggingface_hub import ModelCard
 from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.utils.constants import TRAINING_STATE_DIR
 from torch import Tensor
@@ -15,6 +16,7 @@ from lerobot_predvla.policies.common.cached_features import (
     has_paper_layout,
     use_dataset_frontend,
 )
+from lerobot_predvla.policies.common.losses import masked_mean
 from lerobot_predvla.policies.common.observation_guard import REPORT_INTERVAL_S, ObservationGuard
 from lerobot_predvla.policies.common.sequence_table import EpisodeSequences
 from lerobot_predvla.policies.common.training_guard import TrainingGuard
@@ -28,12 +30,6 @@ from lerobot_predvla.utils.checkpoints import kill_point
 from lerobot_predvla.utils.manifest import verify_manifests
 from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
 from lerobot_predvla.utils.threads import acting_threads
-
-
-def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
-    """Mask-normalised mean over the sequence and batch (the overline of Eq. 10)."""
-    mask = mask.to(x.dtype)
-    return (x * mask).sum() / mask.sum().clamp_min(1.0)
 
 
 def training_complexity(complexity: Tensor, mask: Tensor, reduction: str) -> Tensor:
@@ -83,6 +79,18 @@ def term_weights(cfg: PredVLAConfig) -> dict[str, float]:
             "complexity": 1.0}
 
 
+class Publishing(Protocol):
+    """The Hub code behind LeRobot's publishing methods of the policy (`push_model_to_hub`, `push_to_hub`,
+    `generate_model_card`): `lerobot_predvla.hub.upload`. The hub sits above every policy (the card has each policy
+    type's section), so the policy never imports it: the package's registration (`lerobot_predvla/__init__.py`),
+    which every import of the plugin runs first, sets `PredVLAPolicy.publishing` to it."""
+
+    def push_policy(self, policy: PreTrainedPolicy, repo_id: str, *, cfg=None, state_dict=None, dataset_meta=None,
+                    private: bool | None = None) -> str: ...
+
+    def policy_card(self, policy: PreTrainedPolicy, repo_id: str, *, cfg=None, dataset_meta=None) -> str: ...
+
+
 class PredVLAPolicy(PreTrainedPolicy):
     """PredVLA: language-conditioned predictive-coding policy (paper Section 3).
 
@@ -94,6 +102,7 @@ class PredVLAPolicy(PreTrainedPolicy):
 
     config_class = PredVLAConfig
     name = "predvla"
+    publishing: ClassVar[Publishing]  # hub/upload.py, handed over by the package's registration (see Publishing)
 
     def __init__(self, config: PredVLAConfig, dataset_stats: dict | None = None, dataset_meta=None, **kwargs):
         super().__init__(config)
@@ -164,37 +173,23 @@ class PredVLAPolicy(PreTrainedPolicy):
         (`hub/predvla_card.md`), never the training posteriors. LeRobot pushes the processors afterwards."""
         if peft_model is not None:
             raise NotImplementedError("PredVLA is trained in full; --policy.use_peft is not supported.")
-        from lerobot_predvla.hub.upload import push_policy  # the hub sits above the policies: loaded to publish
-
         return self._without_posteriors(
-            push_policy, self, self.config.repo_id, cfg=cfg, state_dict=state_dict, dataset_meta=dataset_meta,
-            private=self.config.private,
+            self.publishing.push_policy, self, self.config.repo_id, cfg=cfg, state_dict=state_dict,
+            dataset_meta=dataset_meta, private=self.config.private,
         )
 
     def push_to_hub(self, repo_id: str, *, private: bool | None = None, card_kwargs: dict | None = None) -> str:
         """Publish this policy (network, config, PredVLA card; no posteriors) to `repo_id`."""
         if card_kwargs:
             raise ValueError("PredVLA's model card is rendered from hub/predvla_card.md; card_kwargs are not used.")
-        from lerobot_predvla.hub.upload import push_policy  # the hub sits above the policies: loaded to publish
-
-        return self._without_posteriors(push_policy, self, repo_id, private=private)
+        return self._without_posteriors(self.publishing.push_policy, self, repo_id, private=private)
 
     def generate_model_card(
         self, dataset_repo_id=None, model_type=None, license=None, tags=None, cfg=None, dataset_meta=None
-    ):
+    ) -> ModelCard:
         """PredVLA's card (`hub/predvla_card.md`) instead of LeRobot's generic one (same signature)."""
-        from huggingface_hub import ModelCard
-
-        from lerobot_predvla.hub.card import DatasetSummary, render_card  # the hub sits above the policies
-        from lerobot_predvla.hub.upload import publishable_files, without_machine_paths  # (loaded to publish)
-
-        with tempfile.TemporaryDirectory() as tmp:
-            self._without_posteriors(self.save_pretrained, Path(tmp))
-            if cfg is not None:
-                cfg.save_pretrained(Path(tmp))
-            dataset = DatasetSummary.from_meta(dataset_meta) if dataset_meta is not None else None
-            files = without_machine_paths(publishable_files(Path(tmp)))
-            return ModelCard(render_card(files, self.config.repo_id or "local", dataset))
+        return ModelCard(self._without_posteriors(
+            self.publishing.policy_card, self, self.config.repo_id or "local", cfg=cfg, dataset_meta=dataset_meta))
 
     def _without_posteriors(self, fn, *args, **kwargs):
         self._write_posteriors = False  # the Hub gets the controller, never the training posteriors

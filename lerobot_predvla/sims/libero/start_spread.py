@@ -1,8 +1,8 @@
 """How episodes start: the spread of the arm's initial joint angles and of the objects' placements, over the
 benchmark's official init states and over randomised resets (`predvla demos`, `--env.init_states=false`).
 
-`python -m lerobot_predvla.libero.start_spread --suite libero_object --tasks 0,2 [--init-noise 0.02] [--n 20]`
-`python -m lerobot_predvla.libero.start_spread --suite libero_object --demos HDF5_ROOT [--out start_spread.json]`
+`python -m lerobot_predvla.sims.libero.start_spread --suite libero_object --tasks 0,2 [--init-noise 0.02] [--n 20]`
+`python -m lerobot_predvla.sims.libero.start_spread --suite libero_object --demos HDF5_ROOT [--out start_spread.json]`
 (the recorded demonstrations' own first states beside the official init states, every task of the suite)
 
 Demonstrations cover only the starts they were recorded from: on libero_object the official init states and the
@@ -19,8 +19,8 @@ import numpy as np
 from tqdm import tqdm
 
 from lerobot_predvla.columns import SUITES
-from lerobot_predvla.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
-from lerobot_predvla.libero.hdf5_layout import task_file
+from lerobot_predvla.sims.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
+from lerobot_predvla.sims.libero.hdf5_layout import task_file
 from lerobot_predvla.utils.io import atomic_write_json
 
 RESET_SEED = 1000  # randomised resets start from this seed, away from the demonstrations' (`predvla demos`)

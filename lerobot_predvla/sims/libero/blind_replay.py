@@ -27,8 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_predvla.columns import SUITES
-from lerobot_predvla.libero.protocol import PAPER_EPISODE_LENGTH, SUITE_LABELS
-from lerobot_predvla.libero.rollout import IDLE, SETTLE_STEPS
+from lerobot_predvla.sims.libero.env import make_env, official_init_states, task_spec
+from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH, SUITE_LABELS
+from lerobot_predvla.sims.libero.rollout import IDLE, SETTLE_STEPS, run_episode
+from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
 PLANS = ("state0", "nearest_mean")
 NEAREST_MEAN_KEY = "nearest_mean_plan"  # report.json: the second plan's numbers, beside the state-0 plan's
@@ -87,8 +89,6 @@ def _reset(env, init_state: np.ndarray, seed: int) -> None:
 
 def record_plan(env, init_state: np.ndarray, seed: int, settings: Settings) -> dict:
     """The scripted expert from `init_state` (`run_episode`), its actions kept as the plan."""
-    from lerobot_predvla.libero.rollout import run_episode
-
     assert settings.settle_steps == SETTLE_STEPS, "run_episode settles for SETTLE_STEPS"
     np.random.seed(seed)
     episode = run_episode(env, seed, settings.cap, settings.half_turn, init_state=init_state)
@@ -112,8 +112,6 @@ def replay(env, init_state: np.ndarray, actions: np.ndarray, seed: int, settings
 def run_task(suite: str, task_id: int, settings: Settings, progress=None) -> dict:
     """Both plans of one task, each replayed on `settings.states` (and on its own source state); `progress` is
     called after every episode."""
-    from lerobot_predvla.libero.env import make_env, official_init_states, task_spec
-
     t0 = time.time()
     spec = task_spec(suite, task_id)
     init_states = official_init_states(suite, task_id)
@@ -262,8 +260,6 @@ def figure(report: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from lerobot_predvla.utils.io import atomic_save_figure
-
     suites = list(report)
     fig, axes = plt.subplots(len(suites), 1, figsize=(9, 2.6 * len(suites) + 0.6), squeeze=False)
     for ax, suite in zip(axes[:, 0], suites, strict=True):
@@ -292,8 +288,6 @@ def figure(report: dict, path: Path) -> None:
 
 def write_report(out: Path, command: str, expected_tasks: dict[str, int]) -> dict:
     """report.json, report.md and the figure from every per-task file under `out`."""
-    from lerobot_predvla.utils.io import atomic_write_json, atomic_write_text
-
     report = collect(out)
     if not report:
         return report

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from lerobot_predvla.libero.expert.motion import CLOSE, DOWN, OPEN, PUSH_LEAN, Motion, Skill, _box_gap, _unit
+from lerobot_predvla.sims.libero.expert.motion import CLOSE, DOWN, OPEN, PUSH_LEAN, Motion, Skill, _box_gap, _unit
 
 
 class Pushing(Motion):

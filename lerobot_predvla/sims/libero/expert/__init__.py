@@ -6,8 +6,8 @@ The plan comes from the task's BDDL goal predicates (`In`/`On` become pick-and-p
 
 import numpy as np
 
-from lerobot_predvla.libero.expert.articulate import Articulating
-from lerobot_predvla.libero.expert.motion import (
+from lerobot_predvla.sims.libero.expert.articulate import Articulating
+from lerobot_predvla.sims.libero.expert.motion import (
     DEFAULT_HALF_TURN,
     HALF_TURN_RULES,
     MAX_FINGER_SPAN,
@@ -17,9 +17,9 @@ from lerobot_predvla.libero.expert.motion import (
     ExpertFailure,
     Skill,
 )
-from lerobot_predvla.libero.expert.place import Placing
-from lerobot_predvla.libero.expert.push import Pushing
-from lerobot_predvla.libero.geometry import SceneView
+from lerobot_predvla.sims.libero.expert.place import Placing
+from lerobot_predvla.sims.libero.expert.push import Pushing
+from lerobot_predvla.sims.libero.geometry import SceneView
 
 __all__ = ["ExpertFailure", "ScriptedExpert"]
 

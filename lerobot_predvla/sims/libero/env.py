@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_predvla.columns import SIM_CAMERAS, SUITES
-from lerobot_predvla.libero.config_path import active_config
+from lerobot_predvla.sims.libero.config_path import active_config
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 

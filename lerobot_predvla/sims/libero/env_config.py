@@ -38,8 +38,8 @@ from lerobot.processor import ObservationProcessorStep, PolicyProcessorPipeline,
 from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 
 from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM
-from lerobot_predvla.envs.fault_injection import FaultInjectionStep
-from lerobot_predvla.libero.protocol import EVAL_ENV_TYPE
+from lerobot_predvla.sims.libero.fault_injection import FaultInjectionStep
+from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
 
 OBS_ROBOT_STATE = "observation.robot_state"
 
@@ -76,7 +76,7 @@ class PredVLALiberoEnv(LiberoEnv):
     """LeRobot's LIBERO env config (`--env.task`, `--env.task_ids`, `--env.episode_length`, ...) for PredVLA.
 
     `--env.episode_length=600` is the paper's step cap (Section 4.4); left unset, LeRobot's per-suite caps
-    apply (`lerobot_predvla.libero.protocol.STEP_CAPS`: 280/280/300/520 for spatial/object/goal/10).
+    apply (`lerobot_predvla.sims.libero.protocol.STEP_CAPS`: 280/280/300/520 for spatial/object/goal/10).
 
     Args:
         render_interval: Render the cameras every this many control steps (PredVLA's
@@ -114,7 +114,8 @@ class PredVLALiberoEnv(LiberoEnv):
         return {**super().gym_kwargs, "render_interval": self.render_interval}
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False):
-        from lerobot_predvla.envs.predvla_libero import create_envs  # the simulator, loaded once an env is built
+        # The simulator (LIBERO, robosuite, MuJoCo), loaded once an env is built: registering the type loads none.
+        from lerobot_predvla.sims.libero.predvla_libero import create_envs
 
         if self.task is None:
             raise ValueError("--env.task is required (a LIBERO suite, e.g. libero_object).")

@@ -12,7 +12,7 @@ STEP_CAPS = {"libero_spatial": 280, "libero_object": 280, "libero_goal": 300, "l
 
 PAPER_EPISODES_PER_TASK = 50  # Section 4: rollouts per task, from the official initial states
 PAPER_EPISODE_LENGTH = 600  # Section 4.4: control-step cap per rollout
-EVAL_ENV_TYPE = "predvla_libero"  # `--env.type` of LeRobot's LIBERO env with PredVLA's observations (envs/)
+EVAL_ENV_TYPE = "predvla_libero"  # `--env.type` of LeRobot's LIBERO env with PredVLA's observations (env_config.py)
 # The paper's libero_object column (Table 3 PredVLA, Table 6 A6 open loop, Table 4 B2 and B1): (mean, std, seeds).
 PAPER_OBJECT = {"error_regression": (89.24, 6.13, 14), "open_loop": (78.14, 4.53, 7),
                 "bc_rnn": (2.20, 2.27, None), "bc_transformer": (15.49, 12.15, None)}

@@ -5,9 +5,9 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from lerobot_predvla.libero.env import fixture_poses, random_reset
-from lerobot_predvla.libero.expert import ExpertFailure, ScriptedExpert
-from lerobot_predvla.libero.expert.motion import DEFAULT_HALF_TURN
+from lerobot_predvla.sims.libero.env import fixture_poses, random_reset
+from lerobot_predvla.sims.libero.expert import ExpertFailure, ScriptedExpert
+from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN
 
 SETTLE_STEPS = 5  # idle steps after reset so objects rest on their support (not recorded)
 IDLE = np.array([0, 0, 0, 0, 0, 0, -1.0])

@@ -7,7 +7,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from lerobot_predvla.libero.env import TaskSpec, env_kwargs
+from lerobot_predvla.sims.libero.env import TaskSpec, env_kwargs
 
 OBS_KEYS = {  # dataset name -> trailing shape
     "agentview_rgb": (128, 128, 3),

@@ -3,8 +3,8 @@
 import numpy as np
 
 from lerobot_predvla.columns import SIM_CAMERAS
-from lerobot_predvla.libero.env import set_fixture_poses
-from lerobot_predvla.libero.rollout import Episode
+from lerobot_predvla.sims.libero.env import set_fixture_poses
+from lerobot_predvla.sims.libero.rollout import Episode
 
 
 def set_cameras_enabled(render_env, enabled: bool) -> None:

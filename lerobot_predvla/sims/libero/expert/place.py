@@ -4,8 +4,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lerobot_predvla.libero.expert.grasp import Grasping
-from lerobot_predvla.libero.expert.motion import (
+from lerobot_predvla.sims.libero.expert.grasp import Grasping
+from lerobot_predvla.sims.libero.expert.motion import (
     CLOSE,
     MAX_FINGER_SPAN,
     OPEN,

@@ -1,5 +1,5 @@
 """Check that every task of the four LIBERO suites builds, resets, loads an init state, steps and
-evaluates its goal: `python -m lerobot_predvla.libero.smoke [--suites ...] [--steps N]`."""
+evaluates its goal: `python -m lerobot_predvla.sims.libero.smoke [--suites ...] [--steps N]`."""
 
 import argparse
 import sys
@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from lerobot_predvla.columns import SUITES
-from lerobot_predvla.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
+from lerobot_predvla.sims.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,7 +24,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from lerobot_predvla.libero.env import check_libero_config
+from lerobot_predvla.sims.libero.env import check_libero_config
 
 check_libero_config()  # before LIBERO reads its config: a stale one otherwise fails deep inside a reset
 

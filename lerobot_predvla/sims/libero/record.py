@@ -8,11 +8,11 @@ import time
 
 from tqdm import tqdm
 
-from lerobot_predvla.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
-from lerobot_predvla.libero.hdf5_layout import file_attrs, task_file, write_task_file
-from lerobot_predvla.libero.protocol import STEP_CAPS
-from lerobot_predvla.libero.render import replay_observations
-from lerobot_predvla.libero.rollout import run_episode
+from lerobot_predvla.sims.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
+from lerobot_predvla.sims.libero.hdf5_layout import file_attrs, task_file, write_task_file
+from lerobot_predvla.sims.libero.protocol import STEP_CAPS
+from lerobot_predvla.sims.libero.render import replay_observations
+from lerobot_predvla.sims.libero.rollout import run_episode
 
 
 def episode_seed(seed: int, task_id: int, attempt: int) -> int:

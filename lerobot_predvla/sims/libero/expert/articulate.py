@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from lerobot_predvla.libero.expert.motion import (
+from lerobot_predvla.sims.libero.expert.motion import (
     CLOSE,
     DOWN,
     OPEN,

@@ -1,1 +1,0 @@
-"""LeRobot env types of the plugin (`--env.type=predvla_libero`)."""

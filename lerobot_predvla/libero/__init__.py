@@ -1,1 +1,0 @@
-"""LIBERO simulator support: installation, scripted expert, demonstration recording."""
