@@ -272,11 +272,23 @@ def test_every_documented_command_exists():
     assert not wrong, "\n".join(wrong)
 
 
+BARE_BRACKET = re.compile(r"(^|\s)--[\w.]+=[\[{]")
+# Inline code that is a command or a command's argument, as opposed to a quoted message (`zsh: no matches found: ...`).
+INLINE_COMMAND = re.compile(r"\s*(--|lerobot-|predvla |python |make |accelerate |torchrun )")
+
+
 def test_bracket_arguments_are_quoted():
-    """zsh expands an unquoted `--x=[0,1]`; every documented one is quoted."""
-    bare = [f"{path.name}: {line.strip()}" for path in DOCS
-            for block in re.findall(r"```(?:bash|sh|shell)\n(.*?)```", path.read_text(), flags=re.S)
-            for line in block.splitlines() if re.search(r"(^|\s)--[\w.]+=\[", line)]
+    """zsh expands an unquoted `--x=[0,1]` (bash a `--x={a,b}`); every documented one is quoted, in command blocks
+    and in inline commands alike."""
+    bare = []
+    for path in DOCS:
+        text = path.read_text()
+        blocks = re.findall(r"```(?:bash|sh|shell)\n(.*?)```", text, flags=re.S)
+        bare += [f"{path.name}: {line.strip()}" for block in blocks for line in block.splitlines()
+                 if BARE_BRACKET.search(line)]
+        inline = re.findall(r"`([^`]+)`", re.sub(r"```.*?```", "", text, flags=re.S))
+        bare += [f"{path.name}: `{span}`" for span in inline
+                 if INLINE_COMMAND.match(span) and BARE_BRACKET.search(span)]
     assert not bare, "\n".join(bare)
 
 
