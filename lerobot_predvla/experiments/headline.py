@@ -22,11 +22,11 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from lerobot_predvla.columns import SUITES
-from lerobot_predvla.experiments.report import MISSING, SUMMARY_FILE, ReportError, run_episodes
-from lerobot_predvla.experiments.sweep import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
+from lerobot_predvla.experiments.formatting import MISSING, fmt_mean_std, fmt_rate, table
+from lerobot_predvla.experiments.report.results import SUMMARY_FILE, ReportError, run_episodes
+from lerobot_predvla.experiments.statistics import episode_totals, mean_std
+from lerobot_predvla.experiments.sweep.spec import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
 from lerobot_predvla.hub.upload import repository_files, shipped_checkpoints
 from lerobot_predvla.libero.protocol import (
     PAPER_EPISODE_LENGTH,
@@ -96,15 +96,12 @@ class Cell:
         return len(self.rates)
 
     def mean(self) -> float | None:
-        return float(np.mean(list(self.rates.values()))) if self.rates else None
+        return mean_std(list(self.rates.values()))[0]
 
     def text(self) -> str:
         if not self.rates:
             return MISSING
-        values = list(self.rates.values())
-        if len(values) == 1:
-            return f"{values[0]:.1f} (n = 1)"
-        return f"{np.mean(values):.1f} ± {np.std(values, ddof=1):.1f} (n = {len(values)})"
+        return fmt_mean_std(*mean_std(list(self.rates.values())), self.n, digits=1, count=True)
 
 
 @dataclass
@@ -225,14 +222,9 @@ def build_rows(root: Path) -> list[Row]:
     return rows
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    return "\n".join([*lines, *["| " + " | ".join(r) + " |" for r in rows]])
-
-
 def _paper_cell(key: str) -> str:
     mean, std, seeds = PAPER_OBJECT[key]
-    return f"{mean:.2f} ± {std:.2f}" + (f" (n = {seeds})" if seeds else "")
+    return fmt_mean_std(mean, std, seeds, count=True)
 
 
 def row_label(row: Row, prefix: str) -> str:
@@ -248,7 +240,7 @@ def summary_table(rows: list[Row], prefix: str, blind: dict | None = None) -> st
         body.append([blind_label(blind[SUITE], prefix),
                      *[blind_cell(blind[SUITE]) if key == "open_loop" else MISSING for key, _ in COLUMNS]])
     body += [[row_label(row, prefix), *[row.cells[key].text() for key, _ in COLUMNS]] for row in rows]
-    return _table(["libero_object success (%), mean over training seeds", *[name for _, name in COLUMNS]], body)
+    return table(["libero_object success (%), mean over training seeds", *[name for _, name in COLUMNS]], body)
 
 
 # ----- the reference row: one demonstration replayed blind (`predvla blind-replay`) ----------------------------
@@ -268,12 +260,7 @@ def load_blind_replay(root: Path) -> dict | None:
 
 
 def blind_totals(tasks: dict, second: bool = False) -> tuple[int, int]:
-    rows = [t[BLIND_SECOND] if second else t for t in tasks.values()]
-    return sum(int(r["successes"]) for r in rows), sum(int(r["episodes"]) for r in rows)
-
-
-def _rate(successes: int, episodes: int) -> str:
-    return f"{100 * successes / episodes:.1f} ({successes}/{episodes})" if episodes else MISSING
+    return episode_totals(t[BLIND_SECOND] if second else t for t in tasks.values())
 
 
 def _states_text(states: list[int]) -> str:
@@ -298,7 +285,8 @@ def blind_label(tasks: dict, prefix: str) -> str:
 
 def blind_cell(tasks: dict) -> str:
     """Success of the state-0 plan, then of the nearest-mean start's plan, pooled over the suite's tasks."""
-    return f"{_rate(*blind_totals(tasks))}; from the nearest-mean start {_rate(*blind_totals(tasks, second=True))}"
+    nearest_mean = fmt_rate(*blind_totals(tasks, second=True))
+    return f"{fmt_rate(*blind_totals(tasks))}; from the nearest-mean start {nearest_mean}"
 
 
 def blind_suite_table(blind: dict) -> str:
@@ -306,9 +294,9 @@ def blind_suite_table(blind: dict) -> str:
     for suite in SUITES:
         tasks = blind.get(suite, {})
         body.append([f"{suite} ({SUITE_LABELS[suite]})", f"{PAPER_OPEN_LOOP[suite]:.2f}",
-                     _rate(*blind_totals(tasks)) if tasks else "not run",
-                     _rate(*blind_totals(tasks, second=True)) if tasks else "not run", str(len(tasks))])
-    return _table(["suite", "paper, exact open loop (Table 6, A6), %", "one demonstration replayed blind: plan from "
+                     fmt_rate(*blind_totals(tasks)) if tasks else "not run",
+                     fmt_rate(*blind_totals(tasks, second=True)) if tasks else "not run", str(len(tasks))])
+    return table(["suite", "paper, exact open loop (Table 6, A6), %", "one demonstration replayed blind: plan from "
                    "official init state 0, % (successes/episodes)", "plan from the nearest-mean start, %",
                    "tasks run"], body)
 
@@ -350,7 +338,7 @@ def blind_task_table(blind: dict, row: Row | None, open_loop: dict[str, tuple[in
             s, n = open_loop.get(task_id, (0, 0))
             cells.append(f"{s}/{n}" if n else MISSING)
         body.append(cells)
-    return _table(header, body)
+    return table(header, body)
 
 
 def blind_text(root: Path, blind: dict | None, rows: list[Row], detailed: bool) -> list[str]:
@@ -417,7 +405,7 @@ def seed_table(rows: list[Row]) -> str:
                 body.append([f"{row.experiment.recipe}; {row.demonstrations}", name, record["config"], str(seed),
                              f"{record['successes']}/{record['episodes']}",
                              f"{record['n_episodes_per_task']} per task, {record['episode_length']}-step cap"])
-    return _table(["row", "column", "configuration", "training seed", "successes", "protocol"], body)
+    return table(["row", "column", "configuration", "training seed", "successes", "protocol"], body)
 
 
 def render(rows: list[Row], prefix: str, detailed: bool, blind: dict | None = None, root: Path | None = None) -> str:
