@@ -314,7 +314,7 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None, co
     departures = config_departures(config)
     if departures:
         lines += ["", "Departures from the configuration class's defaults (for PredVLA: the paper's Table 2): "
-                  + "; ".join(departures) + "."]
+                  + "; ".join(map(str, departures)) + "."]
     return "\n".join(lines)
 
 
