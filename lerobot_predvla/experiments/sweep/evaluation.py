@@ -11,12 +11,12 @@ from concurrent.futures import ThreadPoolExecutor
 from datetime import UTC, datetime
 from pathlib import Path
 
+from lerobot_predvla import lerobot_commands
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
 from lerobot_predvla.experiments.statistics import episode_totals, percent
 from lerobot_predvla.experiments.sweep.layout import EVAL_WALL_FILE
 from lerobot_predvla.experiments.sweep.spec import ConfigSpec, Run, SweepError
 from lerobot_predvla.experiments.sweep.workspace import Workspace
-from lerobot_predvla.lerobot_commands import eval_command, field_args
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.manifest import sha256_file
 from lerobot_predvla.utils.versions import machine, package_versions
@@ -45,11 +45,11 @@ class Evaluation(Workspace):
         arguments."""
         s = self.sweep.settings
         spec = self.sweep.configs[run.config]
-        return eval_command(
+        return lerobot_commands.eval_command(
             program=self.lerobot_eval,
             checkpoint=checkpoint,
             device=s.eval_device,
-            policy=[*field_args(spec.eval_overrides), *self.corruption_args(spec, run.suite)],
+            policy=[*lerobot_commands.field_args(spec.eval_overrides), *self.corruption_args(spec, run.suite)],
             env_type=s.env_type,
             suite=run.suite,
             episode_length=s.episode_length,
@@ -66,7 +66,7 @@ class Evaluation(Workspace):
         if spec.corruption is None:
             return []
         source = self.sweep.settings.datasets[self.sweep.corruption_source(spec, suite)]
-        return field_args(
+        return lerobot_commands.field_args(
             {
                 "er_corruption_channel": spec.corruption["channel"],
                 "er_corruption_alpha": float(spec.corruption["alpha"]),

@@ -13,6 +13,7 @@ from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 
+from lerobot_predvla import lerobot_commands
 from lerobot_predvla.experiments.lr_selection import (
     CRITERION,
     PENDING_LR,
@@ -27,7 +28,6 @@ from lerobot_predvla.experiments.lr_selection import (
 from lerobot_predvla.experiments.sweep.data import DataStages
 from lerobot_predvla.experiments.sweep.layout import TRAIN_DONE_FILE
 from lerobot_predvla.experiments.sweep.spec import ConfigSpec, SweepError
-from lerobot_predvla.lerobot_commands import PREDVLA, launcher, resume_args, train_command
 from lerobot_predvla.utils.checkpoints import last_pretrained, prune_checkpoints
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.parameters import count_parameters
@@ -40,7 +40,9 @@ class Training(DataStages):
     def launcher(self) -> list[str]:
         """The program words of every `lerobot-train` of the sweep (`accelerate_processes` processes)."""
         s = self.sweep.settings
-        return launcher(s.accelerate_processes, s.train_device, self.lerobot_train, self.accelerate, self.torchrun)
+        return lerobot_commands.launcher(
+            s.accelerate_processes, s.train_device, self.lerobot_train, self.accelerate, self.torchrun
+        )
 
     def train_command(self, spec: ConfigSpec, suite: str, seed: int) -> list[str]:
         s = self.sweep.settings
@@ -49,7 +51,7 @@ class Training(DataStages):
         procs = s.accelerate_processes
         if s.batch_size % procs:
             raise SweepError(f"batch_size {s.batch_size} is not divisible by accelerate_processes {procs}.")
-        return train_command(
+        return lerobot_commands.train_command(
             program=self.launcher(),
             policy=spec.policy_args(self.sweep.base_dir, suite),
             dataset_repo_id=dataset["repo_id"],
@@ -70,7 +72,11 @@ class Training(DataStages):
         samples without camera frames, for trainings started before the copy existed."""
         config = last_pretrained(train_dir) / "train_config.json"
         train_root = self.train_root(suite)
-        return [*self.launcher(), *resume_args(config), *([f"--dataset.root={train_root}"] if train_root else [])]
+        return [
+            *self.launcher(),
+            *lerobot_commands.resume_args(config),
+            *([f"--dataset.root={train_root}"] if train_root else []),
+        ]
 
     def pending_train_command(self, spec: ConfigSpec, suite: str, seed: int) -> list[str]:
         """A training's resume command when it has a checkpoint, else its command from the start."""
@@ -147,7 +153,7 @@ class Training(DataStages):
 
     @staticmethod
     def publish_command(dest: Path, last: Path) -> list[str]:
-        return [*PREDVLA, "push", str(last), os.path.relpath(dest), "--out", str(dest)]
+        return [*lerobot_commands.PREDVLA, "push", str(last), os.path.relpath(dest), "--out", str(dest)]
 
     def publish_model(self, spec: ConfigSpec, suite: str, seed: int, last: Path) -> Path | bool:
         """`train.publish`: the final model of a training, as `predvla push --out` writes it, in its folder; False
