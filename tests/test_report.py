@@ -8,6 +8,7 @@ import pytest
 
 from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.experiments.report import FIGURES, MISSING, load_summary, write_report
+from lerobot_predvla.experiments.report.sections import INSPECT_DIR, START_SPREAD_FILE
 from lerobot_predvla.experiments.sweep import ConfigSpec
 from lerobot_predvla.utils.io import atomic_write_json
 
@@ -438,3 +439,21 @@ def test_training_time_counts_every_call_in_the_training_log(tmp_path):
     table = "\n".join(stages_section(records, tmp_path)).splitlines()
     rows = [line for line in table if line.startswith("| ") and "libero_object" in line]
     assert [line.split(" | ")[4] for line in rows] == ["90 (2 calls)", "90 (2 calls)", "10"]
+
+
+def test_a_committed_report_regenerates_identically(tmp_path, monkeypatch):
+    """`predvla report` on the committed runs of results/libero_object_table2 writes its committed report.json, and
+    its report.md but for the stage table's recorded commands (their paths are the recording machine's); the
+    demonstrations' starts and the inspections beside the report are read where they are."""
+    repo = Path(__file__).resolve().parents[1]
+    committed = repo / "results" / "libero_object_table2"
+    monkeypatch.chdir(repo)  # the report names RUNS_DIR as given, and paths relative to the repository root
+    for name in (START_SPREAD_FILE, INSPECT_DIR):
+        (tmp_path / name).symlink_to(committed / name)
+    write_report(Path("results/libero_object_table2/runs"), tmp_path)
+    assert (tmp_path / "report.json").read_text() == (committed / "report.json").read_text()
+
+    def sections(text: str) -> list[str]:
+        return [s for s in text.split("\n## ") if not s.startswith("Stages: wall time and commands")]
+
+    assert sections((tmp_path / "report.md").read_text()) == sections((committed / "report.md").read_text())
