@@ -3,6 +3,7 @@ fresh clone recomputes, the demonstrations' starts, the mechanism over training 
 and the baselines' learning rates chosen on held-out demonstrations."""
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -28,6 +29,11 @@ INSPECT_DIR = "inspect"  # beside the report: inspect/seed<N>/ from `predvla ins
 CURVES_FIGURE = "training_curves.png"
 
 
+# An absolute path's machine-specific head, whichever checkout recorded it: up to a virtual environment's bin/ or up
+# to one of the repository's top-level folders (a word, or a flag's value after "=").
+MACHINE_PREFIX = re.compile(r"(^|=)/[^\s=]*?/(?:\.venv/bin/|(?=(?:outputs|results|checkpoints|configs)/))")
+
+
 def _relative(command: list[str]) -> str:
     """A recorded command as a reader runs it from the repository root (no machine-specific prefixes)."""
     prefixes = (f"{Path(sys.executable).parent}/", f"{Path.cwd()}/")
@@ -35,6 +41,7 @@ def _relative(command: list[str]) -> str:
     for word in command:
         for prefix in prefixes:
             word = word.replace(prefix, "")
+        word = MACHINE_PREFIX.sub(r"\1", word)
         words.append(f"'{word}'" if "[" in word else word)
     return " ".join(words)
 
