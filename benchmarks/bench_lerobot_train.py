@@ -33,14 +33,16 @@ EPISODES_PER_TASK = 8  # x 2 tasks: 16 episodes of `steps` frames (3,200 frames 
 
 
 def lerobot_train_step_fn(
-    root: Path, batch: int, steps: int, weights: nn.Module | None = None
+    root: Path, batch: int, steps: int, weights: nn.Module | None = None, lengths: tuple[int, int] | None = None
 ) -> tuple[Callable[[], float], PredVLAPolicy]:
     """The loop body of `lerobot-train --policy.type=predvla --batch_size=batch --num_workers=0` on a fresh
-    dataset under `root` (which must not exist). `weights`, a `PredictiveModel`, sets the network's weights.
+    dataset under `root` (which must not exist), training sequences of `steps`. Episodes are `steps` frames long, or
+    between `lengths` (min, max) frames. `weights`, a `PredictiveModel`, sets the network's weights.
     Returns the step (it returns the loss) and the policy."""
     datasets.disable_progress_bars()
-    make_synthetic_dataset(root / "dataset", episodes_per_task=EPISODES_PER_TASK, min_length=steps,
-                           max_length=steps, progress=False)
+    shortest, longest = lengths or (steps, steps)
+    make_synthetic_dataset(root / "dataset", episodes_per_task=EPISODES_PER_TASK, min_length=shortest,
+                           max_length=longest, progress=False)
     policy_config = PredVLAConfig(device="cpu", sequence_length=steps, push_to_hub=False)
     cfg = TrainPipelineConfig(
         dataset=DatasetConfig(repo_id="local/predvla_bench", root=str(root / "dataset")), policy=policy_config,

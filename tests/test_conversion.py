@@ -282,11 +282,11 @@ def test_failure_mid_conversion_leaves_nothing(libero, frontend_dir, tmp_path, c
     real_read = conversion.read_demo
     calls = []
 
-    def failing_read(ref, *args):
+    def failing_read(ref, *args, **kwargs):
         calls.append(ref)
         if len(calls) == 3:
             raise LiberoDataError(ref.file, "cannot read data (simulated bad chunk)", ref.demo, "obs/agentview_rgb")
-        return real_read(ref, *args)
+        return real_read(ref, *args, **kwargs)
 
     monkeypatch.setattr(conversion, "read_demo", failing_read)
     out = tmp_path / "out" / "ds"

@@ -17,6 +17,7 @@ from lerobot_predvla.experiments.headline import (
     HEADLINE_START,
     README,
     RESULTS_DOC,
+    row_numbers,
     update_docs,
 )
 from lerobot_predvla.hub.upload import shipped_checkpoints, without_machine_paths
@@ -56,6 +57,19 @@ def test_headline_cells_are_the_report_json_seeds():
     assert f"{mean:.1f} ± " in _block(REPO / README) and f"(n = {len(seeds)})" in _block(REPO / README)
 
 
+def test_departures_are_one_table_of_the_rows_they_apply_to():
+    """Each departure from the paper once, with the numbers of the rows it applies to; docs/results.md adds what it
+    departs from, which the README leaves to it."""
+    readme, results = _block(REPO / README), _block(REPO / RESULTS_DOC)
+    assert "| benchmark | libero_object only | all |" in readme and "(the paper:" not in readme
+    assert "| benchmark | libero_object only | the paper: four suites | all |" in results
+    assert "| step cap | 280 | the paper: 600 | 2-6 |" in results
+    assert "|  | lambda_q = 100 | Table 2: 1 | 5, 6 |" in results
+    assert readme.count("| 1. [Table 2]") == 1
+    assert [row_numbers(n, 6) for n in ([1, 5], [2, 3, 4, 6], [2, 3], list(range(1, 7)))] == [
+        "1, 5", "2-4, 6", "2, 3", "all"]
+
+
 def _record(config: str, seed: int, successes: int, episodes: int = 500) -> dict:
     return {"config": config, "suite": "libero_object", "seed": seed, "successes": successes, "episodes": episodes,
             "n_episodes_per_task": episodes // 10, "episode_length": 600, "init_states": True}
@@ -86,8 +100,8 @@ def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
     atomic_write_json(table2 / "report.json", {"configs": configs, "pooled": {
         "predvla_table2": {"configs": ["predvla_table2", "predvla_table2_seeds"]}}})
     update_docs(tmp_path)
-    rows = [line for line in _block(tmp_path / README).splitlines() if line.startswith("| [")]
-    assert "results/libero_object_table2/report.md" in rows[0]
+    rows = [line for line in _block(tmp_path / README).splitlines() if re.match(r"\| \d+\. \[", line)]
+    assert rows[0].startswith("| 1. [") and "results/libero_object_table2/report.md" in rows[0]
     assert "| 70.0 ± 10.0 (n = 3) | 76.0 (n = 1) | — | — |" in rows[0]  # (80 + 60 + 70) / 3; open loop seed 0
     assert "libero_object_cpu/report.md" in rows[1]
     assert update_docs(tmp_path, check=True) == []
@@ -272,11 +286,23 @@ def test_every_documented_command_exists():
     assert not wrong, "\n".join(wrong)
 
 
+BARE_BRACKET = re.compile(r"(^|\s)--[\w.]+=[\[{]")
+# Inline code that is a command or a command's argument, as opposed to a quoted message (`zsh: no matches found: ...`).
+INLINE_COMMAND = re.compile(r"\s*(--|lerobot-|predvla |python |make |accelerate |torchrun )")
+
+
 def test_bracket_arguments_are_quoted():
-    """zsh expands an unquoted `--x=[0,1]`; every documented one is quoted."""
-    bare = [f"{path.name}: {line.strip()}" for path in DOCS
-            for block in re.findall(r"```(?:bash|sh|shell)\n(.*?)```", path.read_text(), flags=re.S)
-            for line in block.splitlines() if re.search(r"(^|\s)--[\w.]+=\[", line)]
+    """zsh expands an unquoted `--x=[0,1]` (bash a `--x={a,b}`); every documented one is quoted, in command blocks
+    and in inline commands alike."""
+    bare = []
+    for path in DOCS:
+        text = path.read_text()
+        blocks = re.findall(r"```(?:bash|sh|shell)\n(.*?)```", text, flags=re.S)
+        bare += [f"{path.name}: {line.strip()}" for block in blocks for line in block.splitlines()
+                 if BARE_BRACKET.search(line)]
+        inline = re.findall(r"`([^`]+)`", re.sub(r"```.*?```", "", text, flags=re.S))
+        bare += [f"{path.name}: `{span}`" for span in inline
+                 if INLINE_COMMAND.match(span) and BARE_BRACKET.search(span)]
     assert not bare, "\n".join(bare)
 
 

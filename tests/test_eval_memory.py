@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from lerobot_predvla.columns import SIM_CAMERAS
-from lerobot_predvla.sims.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+from lerobot_predvla.sims.libero.env import use_headless_gl
 
 pytestmark = pytest.mark.simulator
+use_headless_gl()  # before the tests below load the simulator
 
 SUITE = "libero_object"
 
@@ -119,7 +120,6 @@ def test_the_shared_render_context_is_freed_before_exit_without_a_traceback():
     code = ("import atexit, gc, sys\n"
             "atexit.register(lambda: (setattr(sys.modules['lerobot_predvla.sims.libero.predvla_libero'], 'RENDERER',"
             " None), gc.collect()))\n"
-            "from lerobot_predvla.sims.libero import env as _e\n"
             "from lerobot_predvla.sims.libero import predvla_libero\n"
             "from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv\n"
             "venv = PredVLALiberoEnv(task='libero_object', task_ids=[0]).create_envs(n_envs=1)['libero_object'][0]\n"

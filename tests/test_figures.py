@@ -103,5 +103,5 @@ def test_a_figure_two_pages_give_differently_is_found():
     cell = "| 72.0 (n = 1) | 74.0 (n = 1) |"
     assert cell in pages["README.md"]
     injected = {**pages, "README.md": pages["README.md"].replace(cell, "| 70.0 (n = 1) | 74.0 (n = 1) |")}
-    key = "headline: CPU recipe; 20 scripted demonstrations per task (report) / PredVLA, error regression"
+    key = "headline: 2. CPU recipe; 20 scripted demonstrations per task (report) / PredVLA, error regression"
     assert disagreements(injected) == {key: {"README.md": [70.0], "docs/results.md": [72.0]}}

@@ -17,11 +17,12 @@ OWN_PARTS = ("policies", "sims")  # folders whose subfolders are parts of their 
 _BASE = {"utils", "columns"}
 _POLICIES = {"policies", "policies.common", "policies.predvla", "policies.bc_rnn", "policies.bc_transformer",
              "policies.ladder"}
-_BELOW_SIMULATORS = _BASE | {"frontend", "data", "robots"} | _POLICIES
+_BELOW_SIMULATORS = _BASE | {"frontend", "data", "robots", "lerobot_commands"} | _POLICIES
 _SIMULATORS = {"sims", "sims.libero"}
 ALLOWED = {
     "utils": set(),
     "columns": set(),  # column names and shared constants
+    "lerobot_commands": set(),  # the command lines of lerobot-train and lerobot-eval
     "frontend": _BASE,
     "data": _BASE | {"frontend"},  # every reader, and what runs the front end over a dataset
     "robots": _BASE,
@@ -32,7 +33,7 @@ ALLOWED = {
     "policies.bc_transformer": _BASE | {"frontend", "policies", "policies.common"},
     "policies.ladder": _BASE | {"frontend", "policies", "policies.common", "policies.predvla"},  # PredVLA, cut down
     "sims": set(),  # one folder per simulator, nothing of its own
-    "sims.libero": _BASE | {"policies.common"},  # the simulator and its LeRobot env type
+    "sims.libero": _BELOW_SIMULATORS,  # the simulator and its LeRobot env type
     "hub": _BELOW_SIMULATORS | _SIMULATORS,
     "lerobot_integration": _BELOW_SIMULATORS | _SIMULATORS,
     "experiments": _BELOW_SIMULATORS | _SIMULATORS | {"hub"},

@@ -48,3 +48,18 @@ assert os.environ.get("LIBERO_CONFIG_PATH") == expected, os.environ.get("LIBERO_
     env = {k: v for k, v in os.environ.items() if k != "LIBERO_CONFIG_PATH"}
     result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr[-3000:]
+
+
+def test_the_predvla_command_sets_mujoco_gl_only_once_it_loads_the_simulator():
+    """Every `predvla` subcommand's module imported and its parser built: no simulator loaded and no `MUJOCO_GL`
+    set (only loading LIBERO sets it, sims/libero/env.py), so what a command starts inherits the user's environment."""
+    code = """
+import os, sys
+from lerobot_predvla.cli.main import build_parser
+build_parser()
+assert "libero.libero" not in sys.modules
+assert "MUJOCO_GL" not in os.environ, os.environ["MUJOCO_GL"]
+"""
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]

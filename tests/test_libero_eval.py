@@ -136,7 +136,7 @@ def test_predvla_libero_env_observations():
     """Fresh images every 4th step equal the demonstrations' render of the same state; proprio is joints+gripper."""
     from lerobot.envs.utils import preprocess_observation
 
-    from lerobot_predvla.sims.libero import env as libero_env  # first: headless MUJOCO_GL
+    from lerobot_predvla.sims.libero import env as libero_env
     from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 
     cfg = PredVLALiberoEnv(task=SUITE, task_ids=[0])
@@ -178,8 +178,9 @@ def test_lerobots_libero_env_gives_predvla_joint_proprio():
 
     from lerobot_predvla import PredVLAConfig
     from lerobot_predvla.policies.bc_rnn.configuration_predvla_bc_rnn import PredVLABCRNNConfig
-    from lerobot_predvla.sims.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
+    from lerobot_predvla.sims.libero.env import use_headless_gl
 
+    use_headless_gl()  # before LeRobot's LIBERO env loads the simulator
     cfg = LiberoEnv(task=SUITE, task_ids=[0], observation_height=128, observation_width=128)
     venv = make_env(cfg, n_envs=1)[SUITE][0]
     obs, _info = venv.reset(seed=[0])
@@ -232,7 +233,6 @@ def test_step_caps_are_lerobots():
     from lerobot.envs.libero import TASK_SUITE_MAX_STEPS
 
     from lerobot_predvla.columns import SUITES
-    from lerobot_predvla.sims.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
     from lerobot_predvla.sims.libero.protocol import STEP_CAPS
 
     assert set(STEP_CAPS) == set(SUITES)

@@ -95,7 +95,7 @@ def test_the_lowest_heldout_loss_wins_and_every_stage_is_skipped_once_done(tmp_p
     fake = FakeTrainer({1e-4: -1.5, 1e-3: -2.25, 1e-2: "diverge"})
     runner = Runner(Sweep.load(sweep_file(tmp_path, eval_every=5)), tmp_path / "runs", execute=fake)
     with pytest.MonkeyPatch.context() as patch:  # the fake has no dataset to read the held-out episodes from
-        patch.setattr("lerobot_predvla.experiments.sweep.heldout_episodes", lambda *a: {"task": [3]})
+        patch.setattr("lerobot_predvla.experiments.sweep.training.heldout_episodes", lambda *a: {"task": [3]})
         outcome = runner.run(progress=False)
     assert outcome["done"] == ["B2/libero_object/seed0", "B2/libero_object/seed1"], outcome
     selection = json.loads(selection_path(tmp_path / "runs", "B2", SUITE).read_text())

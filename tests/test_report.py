@@ -8,6 +8,7 @@ import pytest
 
 from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.experiments.report import FIGURES, MISSING, load_summary, write_report
+from lerobot_predvla.experiments.report.sections import INSPECT_DIR, START_SPREAD_FILE, _relative
 from lerobot_predvla.experiments.sweep import ConfigSpec
 from lerobot_predvla.utils.io import atomic_write_json
 
@@ -438,3 +439,24 @@ def test_training_time_counts_every_call_in_the_training_log(tmp_path):
     table = "\n".join(stages_section(records, tmp_path)).splitlines()
     rows = [line for line in table if line.startswith("| ") and "libero_object" in line]
     assert [line.split(" | ")[4] for line in rows] == ["90 (2 calls)", "90 (2 calls)", "10"]
+
+
+def test_a_committed_report_regenerates_identically(tmp_path, monkeypatch):
+    """`predvla report` on the committed runs of results/libero_object_table2 writes its committed report.json and
+    report.md, whichever checkout regenerates them (recorded commands lose the recording machine's path heads); the
+    demonstrations' starts and the inspections beside the report are read where they are."""
+    repo = Path(__file__).resolve().parents[1]
+    committed = repo / "results" / "libero_object_table2"
+    monkeypatch.chdir(repo)  # the report names RUNS_DIR as given, and paths relative to the repository root
+    for name in (START_SPREAD_FILE, INSPECT_DIR):
+        (tmp_path / name).symlink_to(committed / name)
+    write_report(Path("results/libero_object_table2/runs"), tmp_path)
+    assert (tmp_path / "report.json").read_text() == (committed / "report.json").read_text()
+    assert (tmp_path / "report.md").read_text() == (committed / "report.md").read_text()
+
+
+def test_recorded_commands_lose_the_recording_checkouts_path_heads():
+    command = ["/elsewhere/repo/.venv/bin/lerobot-train", "--dataset.root=/elsewhere/repo/outputs/x/dataset",
+               "/other/clone/results/x/runs", "--policy.path=checkpoints/p", "--env.task_ids=[0]", "--x=/etc/y"]
+    assert _relative(command) == ("lerobot-train --dataset.root=outputs/x/dataset results/x/runs "
+                                  "--policy.path=checkpoints/p '--env.task_ids=[0]' --x=/etc/y")

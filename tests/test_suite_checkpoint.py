@@ -17,7 +17,6 @@ def test_suite_checkpoint_loads_with_make_policy_and_acts_on_libero():
     from lerobot.envs.utils import preprocess_observation
     from lerobot.policies.factory import make_policy, make_pre_post_processors
 
-    from lerobot_predvla.sims.libero import env as _headless  # noqa: F401  (MUJOCO_GL before the simulator loads)
     from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 
     assert not (CHECKPOINT / "posterior_store.safetensors").exists()  # training posteriors are never shipped

@@ -16,6 +16,8 @@ from lerobot_predvla.cli.fit_frontend import (
 )
 from lerobot_predvla.data.conversion import IMAGE_STORAGES, convert_suite
 from lerobot_predvla.data.dataset_conversion import convert_dataset
+from lerobot_predvla.data.libero_hdf5 import scan_suites
+from lerobot_predvla.sims.libero.oracle import fit_oracle
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -40,6 +42,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--language-dim", type=int, default=CONFIG_DEFAULTS["language_dim"])
     parser.add_argument("--vision-dim-per-camera", type=int, default=CONFIG_DEFAULTS["vision_dim_per_camera"])
     parser.add_argument("--batch-size", type=int, default=64, help="Images per ResNet18 forward pass.")
+    parser.add_argument(
+        "--oracle", action="store_true",
+        help="hdf5 only, a diagnostic: replace the visual features by the simulator's object poses relative to the "
+        "gripper (replayed from the demonstrations' saved states, standardised); writes no camera. Evaluate with "
+        "--env.type=predvla_libero --env.oracle=true.",
+    )
     parser.set_defaults(func=run)
 
 
@@ -51,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
     }
     try:
         if dataset_source_given(args):
+            if args.oracle:
+                raise ValueError("--oracle needs the simulator states of LIBERO hdf5 demonstrations (--hdf5-root).")
             summary = convert_dataset(
                 dataset_root=args.dataset_root, dataset_repo_id=args.dataset_repo_id,
                 cameras=parse_cameras(args.cameras), **common,
@@ -58,8 +68,13 @@ def run(args: argparse.Namespace) -> int:
         elif args.hdf5_root is None or args.suite is None:
             raise ValueError("give --hdf5-root and --suite (LIBERO hdf5), or --dataset-root/--dataset-repo-id.")
         else:
+            oracle = None
+            if args.oracle:
+                print("predvla convert: ORACLE front end (a diagnostic): visual features = simulator object poses "
+                      "relative to the gripper, not camera images.")
+                oracle = fit_oracle(args.suite, scan_suites(args.hdf5_root, [args.suite]))
             summary = convert_suite(
-                hdf5_root=args.hdf5_root, suite=args.suite, image_storage=args.image_storage, **common
+                hdf5_root=args.hdf5_root, suite=args.suite, image_storage=args.image_storage, oracle=oracle, **common
             )
     except INPUT_ERRORS as err:
         print(f"predvla convert: error: {err}", file=sys.stderr)

@@ -17,6 +17,8 @@ CONFIG_DEFAULTS = {f.name: f.default for f in fields(PredVLAConfig)}
 # Errors that are the user's input, reported in one line with a non-zero exit.
 INPUT_ERRORS = (ValueError, OSError, VisionWeightsError)
 LANGUAGE_SOURCES = ("demos", "libero")
+# Options that are fields of the same name of both fit configs.
+ENCODING_OPTIONS = ("language_dim", "vision_dim_per_camera", "precision", "frame_stride", "batch_size")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -52,6 +54,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", type=Path, required=True, help="Output directory of the artefact.")
     parser.set_defaults(func=run)
+
+
+def _encoding_settings(args: argparse.Namespace) -> dict:
+    """The settings of both inputs' fits (`FitFrontendConfig`, `FitDatasetFrontendConfig`): encoders, PCA sizes and
+    frame sampling, from the options of the same names."""
+    return {
+        "vision_weights": VisionWeights.parse(args.vision_weights, args.vision_seed),
+        **{name: getattr(args, name) for name in ENCODING_OPTIONS},
+    }
 
 
 def _language_instructions(source: str) -> tuple[str, ...] | None:
@@ -98,13 +109,8 @@ def run(args: argparse.Namespace) -> int:
         cfg = FitFrontendConfig(
             hdf5_root=args.hdf5_root,
             suites=tuple(s.strip() for s in args.suites.split(",") if s.strip()),
-            vision_weights=VisionWeights.parse(args.vision_weights, args.vision_seed),
-            language_dim=args.language_dim,
-            vision_dim_per_camera=args.vision_dim_per_camera,
-            precision=args.precision,
+            **_encoding_settings(args),
             preprocessing=PreprocessingSpec(image_size=args.image_size),
-            frame_stride=args.frame_stride,
-            batch_size=args.batch_size,
             language_instructions=_language_instructions(args.language_from),
         )
         artefact = fit_frontend(cfg)
@@ -124,16 +130,11 @@ def run(args: argparse.Namespace) -> int:
 def run_on_dataset(args: argparse.Namespace) -> int:
     """`--dataset-root/--dataset-repo-id`: fit on an existing LeRobot dataset; errors are left to `run`."""
     cfg = FitDatasetFrontendConfig(
-        vision_weights=VisionWeights.parse(args.vision_weights, args.vision_seed),
+        **_encoding_settings(args),
         dataset_root=args.dataset_root,
         dataset_repo_id=args.dataset_repo_id,
         cameras=parse_cameras(args.cameras),
-        language_dim=args.language_dim,
-        vision_dim_per_camera=args.vision_dim_per_camera,
-        precision=args.precision,
         image_size=args.image_size,
-        frame_stride=args.frame_stride,
-        batch_size=args.batch_size,
     )
     artefact = fit_frontend_on_dataset(cfg)
     artefact.save(args.out)

@@ -16,18 +16,17 @@ Stages (each is skipped when its output already exists, so a killed run resumes)
 import argparse
 import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 from lerobot_predvla.cli.demos import task_ids
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, success_rates
+from lerobot_predvla.lerobot_commands import PREDVLA, eval_command, policy_args, train_command
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.utils.checkpoints import last_pretrained
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json
 
 BANNER = "=" * 78
-BIN = Path(sys.executable).parent
 MODES = {"error regression": 10, "open loop": 0}  # er_iterations
 SUITE_CHECKPOINT = Path("checkpoints/predvla_libero_object")  # trained on all ten libero_object tasks
 
@@ -97,7 +96,6 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.out
     hdf5, frontend, dataset, train = out / "hdf5", out / "frontend", out / "dataset", out / "train"
     checkpoint = last_pretrained(train)
-    predvla = [sys.executable, "-m", "lerobot_predvla.cli.main"]
     tasks = ",".join(map(str, args.tasks))
     if args.vision_weights == "random":
         print(f"{BANNER}\nOFFLINE SUBSTITUTE: the front end uses a seeded random ResNet18 (--vision-weights random),"
@@ -107,30 +105,28 @@ def run(args: argparse.Namespace) -> int:
     if len(task_files) >= len(args.tasks):
         _skip("1/7 demonstrations", hdf5 / args.suite)
     else:
-        _run("1/7 demonstrations", [*predvla, "demos", "--suite", args.suite, "--tasks", tasks,
+        _run("1/7 demonstrations", [*PREDVLA, "demos", "--suite", args.suite, "--tasks", tasks,
                                     "--per-task", str(args.per_task), "--render-interval", "4", "--out", str(hdf5)])
     if frontend.exists():
         _skip("2/7 front end", frontend)
     else:
-        _run("2/7 front end", [*predvla, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", args.suite,
+        _run("2/7 front end", [*PREDVLA, "fit-frontend", "--hdf5-root", str(hdf5), "--suites", args.suite,
                                "--vision-weights", args.vision_weights, "--frame-stride", "4",
                                "--out", str(frontend)])  # PCA on the rendered frames (every 4th)
     if dataset.exists():
         _skip("3/7 conversion", dataset)
     else:
-        _run("3/7 conversion", [*predvla, "convert", "--hdf5-root", str(hdf5), "--suite", args.suite,
+        _run("3/7 conversion", [*PREDVLA, "convert", "--hdf5-root", str(hdf5), "--suite", args.suite,
                                 "--frontend", str(frontend), "--out", str(dataset),
                                 "--repo-id", "local/predvla_libero_demo"])
     if checkpoint.exists():
         _skip("4/7 training", checkpoint)
     else:
-        _run("4/7 training", [
-            str(BIN / "lerobot-train"), "--policy.type=predvla", "--dataset.repo_id=local/predvla_libero_demo",
-            f"--dataset.root={dataset}", "--policy.push_to_hub=false", f"--policy.device={args.device}",
-            "--num_workers=0", "--wandb.enable=false", f"--steps={args.steps}", f"--batch_size={args.batch_size}",
-            f"--save_freq={args.steps}", "--log_freq=50", f"--policy.optimizer_lr={args.lr}",
-            f"--output_dir={train}",
-        ])
+        _run("4/7 training", train_command(
+            policy=policy_args("predvla", {"optimizer_lr": args.lr}), dataset_repo_id="local/predvla_libero_demo",
+            dataset_root=dataset, output_dir=train, steps=args.steps, batch_size=args.batch_size,
+            save_freq=args.steps, device=args.device, extra=["--num_workers=0", "--log_freq=50"],
+        ))
     results = evaluate(args, "5/7 evaluation", checkpoint, args.tasks, args.episodes, out / "eval")
     suite_results = None
     if args.suite_checkpoint == "none":
@@ -168,15 +164,13 @@ def evaluate(args: argparse.Namespace, stage: str, checkpoint: Path, tasks: list
         if info.exists():
             _skip(f"{stage} ({mode})", info)
         else:
-            cap = [] if args.episode_length is None else [f"--env.episode_length={args.episode_length}"]
             sparse = ["--env.render_interval=100000"] if iterations == 0 else []
-            _run(f"{stage} ({mode})", [
-                str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", f"--policy.er_iterations={iterations}",
-                f"--policy.device={args.device}", f"--env.type={EVAL_ENV_TYPE}", f"--env.task={args.suite}",
-                f"--env.task_ids=[{task_list}]", f"--eval.n_episodes={episodes}",
-                f"--eval.batch_size={min(args.eval_batch_size, episodes)}", "--eval.use_async_envs=false",
-                f"--output_dir={eval_dir}", *cap, *sparse,
-            ])
+            _run(f"{stage} ({mode})", eval_command(
+                checkpoint=checkpoint, device=args.device, policy=[f"--policy.er_iterations={iterations}"],
+                env_type=EVAL_ENV_TYPE, suite=args.suite, episode_length=args.episode_length, n_episodes=episodes,
+                batch_size=min(args.eval_batch_size, episodes), output_dir=eval_dir,
+                extra=[f"--env.task_ids=[{task_list}]", *sparse],
+            ))
         results[mode] = success_rates(info)
     return results
 

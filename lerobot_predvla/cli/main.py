@@ -21,6 +21,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.cli.mechanism",
     "lerobot_predvla.cli.trace",
     "lerobot_predvla.cli.divergence",
+    "lerobot_predvla.cli.oracle_probe",
     "lerobot_predvla.cli.sweep",
     "lerobot_predvla.cli.report",
     "lerobot_predvla.cli.push",

@@ -16,11 +16,11 @@ task, the replay robot. About a minute on 2 cores. An existing `--out` folder of
 import argparse
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 from lerobot_predvla.cli import convert, fit_frontend
 from lerobot_predvla.data.example_datasets import SO101, make_dataset
+from lerobot_predvla.lerobot_commands import policy_args, train_command
 from lerobot_predvla.utils.checkpoints import last_pretrained
 
 EPISODES = [("pick up the red cube", 30), ("put the cube in the box", 30), ("pick up the red cube", 30)]
@@ -60,10 +60,9 @@ def run(args: argparse.Namespace) -> int:
         parsed = parser.parse_args(argv)
         if parsed.func(parsed) != 0:
             return 1
-    cmd = [str(Path(sys.executable).with_name("lerobot-train")), "--policy.type=predvla",
-           f"--dataset.repo_id={REPO_ID}_predvla", f"--dataset.root={converted}", "--policy.push_to_hub=false",
-           "--policy.device=cpu", "--num_workers=0", f"--steps={args.steps}", f"--save_freq={args.steps}",
-           "--batch_size=2", "--wandb.enable=false", "--policy.sequence_length=32", f"--output_dir={train}"]
+    cmd = train_command(policy=policy_args("predvla", {"sequence_length": 32}), dataset_repo_id=f"{REPO_ID}_predvla",
+                        dataset_root=converted, output_dir=train, steps=args.steps, batch_size=2,
+                        save_freq=args.steps, device="cpu", extra=["--num_workers=0"])
     print("$", " ".join(cmd), flush=True)
     if subprocess.run(cmd, env={**os.environ, "HF_HUB_OFFLINE": "1"}).returncode != 0:
         return 1

@@ -9,13 +9,13 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import torch
 from tqdm import tqdm
 
 from lerobot_predvla.data.synthetic import make_synthetic_dataset
+from lerobot_predvla.lerobot_commands import policy_args, train_command
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
 from lerobot_predvla.utils.checkpoints import last_pretrained
@@ -71,13 +71,12 @@ def run(args: argparse.Namespace) -> int:
         make_synthetic_dataset(dataset_root, num_tasks=2, episodes_per_task=6)
     checkpoint = last_pretrained(train_dir)
     if not checkpoint.exists():
-        cmd = [
-            str(Path(sys.executable).with_name("lerobot-train")), "--policy.type=predvla",
-            "--dataset.repo_id=local/predvla_synthetic", f"--dataset.root={dataset_root}",
-            "--policy.push_to_hub=false", f"--policy.device={args.device}", "--num_workers=0", "--wandb.enable=false",
-            f"--steps={args.steps}", f"--batch_size={args.batch_size}", f"--save_freq={args.steps}",
-            "--log_freq=25", "--policy.sequence_length=64", "--policy.optimizer_lr=1e-3", f"--output_dir={train_dir}",
-        ]
+        cmd = train_command(
+            policy=policy_args("predvla", {"sequence_length": 64, "optimizer_lr": 1e-3}),
+            dataset_repo_id="local/predvla_synthetic", dataset_root=dataset_root, output_dir=train_dir,
+            steps=args.steps, batch_size=args.batch_size, save_freq=args.steps, device=args.device,
+            extra=["--num_workers=0", "--log_freq=25"],
+        )
         print("$", " ".join(cmd), flush=True)
         subprocess.run(cmd, check=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
     results = {}

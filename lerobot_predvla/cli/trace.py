@@ -8,7 +8,7 @@ environment of a batch until the last one ends, so an episode's trace runs past 
 output directory says which episodes succeeded. Example (seed 1 against seed 0 of the same recipe, one reset):
 
   predvla trace outputs/trace_seed0 --policy.path=checkpoints/predvla_libero_object_lambda_q100 \\
-    --policy.device=cpu --env.type=predvla_libero --env.task=libero_object --env.task_ids=[7] \\
+    --policy.device=cpu --env.type=predvla_libero --env.task=libero_object '--env.task_ids=[7]' \\
     --env.episode_length=280 --env.init_states=false --seed=1000 --eval.n_episodes=2 --eval.batch_size=2
   predvla trace --episode 1 --compare outputs/trace_seed0 outputs/trace_seed1 \\
     --policy.path=checkpoints/predvla_libero_object_lambda_q100_seed1 ...(the same arguments)

@@ -12,14 +12,12 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from lerobot_predvla.data.fitting import FRONTEND_DISTRIBUTIONS
+from lerobot_predvla.data.fitting import fitted_artefact
 from lerobot_predvla.data.lerobot_source import SOURCE_ORIENTATION, LeRobotSource
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.language import LanguageEncoder
-from lerobot_predvla.frontend.pca import fit_pca
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec, preprocess_images
 from lerobot_predvla.frontend.vision import VisionEncoder, VisionWeights
-from lerobot_predvla.utils.versions import package_versions
 
 
 @dataclass
@@ -71,15 +69,8 @@ def fit_frontend_on_dataset(cfg: FitDatasetFrontendConfig) -> FrontendArtefact:
             progress.update(len(batch.index))
 
     instructions = source.episode_tasks()
-    return FrontendArtefact(
-        language=fit_pca(language(instructions), cfg.language_dim),
-        cameras={camera: fit_pca(torch.cat(f).numpy(), cfg.vision_dim_per_camera) for camera, f in features.items()},
-        vision_weights=cfg.vision_weights,
-        vision_fingerprint=vision.fingerprint,
-        vision_precision=cfg.precision,
-        language_source=language.source,
-        language_fingerprint=language.fingerprint,
-        preprocessing=preprocessing,
+    return fitted_artefact(
+        vision, language, instructions, features, cfg.language_dim, cfg.vision_dim_per_camera, preprocessing, start,
         fit={
             "dataset": source.name,
             "dataset_repo_id": source.dataset.repo_id,
@@ -88,7 +79,5 @@ def fit_frontend_on_dataset(cfg: FitDatasetFrontendConfig) -> FrontendArtefact:
             "num_frames": source.num_frames,
             "frame_stride": cfg.frame_stride,
             "num_distinct_instructions": len(set(instructions)),
-            "seconds": round(time.perf_counter() - start, 1),
-            "versions": package_versions(FRONTEND_DISTRIBUTIONS),
         },
     )

@@ -81,17 +81,8 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
     missing = sorted(set(demo_instructions) - set(instructions))
     if missing:
         raise ValueError(f"language_instructions lack the demonstrations' instructions {missing}.")
-    language_basis = fit_pca(language(instructions), cfg.language_dim)
-    cameras = {camera: fit_pca(torch.cat(f).numpy(), cfg.vision_dim_per_camera) for camera, f in features.items()}
-    return FrontendArtefact(
-        language=language_basis,
-        cameras=cameras,
-        vision_weights=cfg.vision_weights,
-        vision_fingerprint=vision.fingerprint,
-        vision_precision=cfg.precision,
-        language_source=language.source,
-        language_fingerprint=language.fingerprint,
-        preprocessing=cfg.preprocessing,
+    return fitted_artefact(
+        vision, language, instructions, features, cfg.language_dim, cfg.vision_dim_per_camera, cfg.preprocessing, start,
         fit={
             "hdf5_root": str(Path(cfg.hdf5_root).resolve()),
             "suites": list(cfg.suites),
@@ -101,6 +92,38 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
             "frame_stride": cfg.frame_stride,
             "num_distinct_instructions": len(set(instructions)),
             "language_fit_on": "task list" if cfg.language_instructions else "demonstrations",
+        },
+    )
+
+
+def fitted_artefact(
+    vision: VisionEncoder,
+    language: LanguageEncoder,
+    instructions: list[str],
+    features: dict[str, list[torch.Tensor]],
+    language_dim: int,
+    vision_dim_per_camera: int,
+    preprocessing: PreprocessingSpec,
+    start: float,
+    fit: dict,
+) -> FrontendArtefact:
+    """The PCA bases and the encoders' identities of a fit, whatever its input (LIBERO hdf5 or a LeRobot dataset).
+
+    The language basis is fitted on one embedding per entry of `instructions`, each camera's visual basis on its
+    encoded frames `features`. `fit` describes the input; the seconds since `start` and the library versions are
+    added to it.
+    """
+    return FrontendArtefact(
+        language=fit_pca(language(instructions), language_dim),
+        cameras={camera: fit_pca(torch.cat(f).numpy(), vision_dim_per_camera) for camera, f in features.items()},
+        vision_weights=vision.weights,
+        vision_fingerprint=vision.fingerprint,
+        vision_precision=vision.precision,
+        language_source=language.source,
+        language_fingerprint=language.fingerprint,
+        preprocessing=preprocessing,
+        fit={
+            **fit,
             "seconds": round(time.perf_counter() - start, 1),
             "versions": package_versions(FRONTEND_DISTRIBUTIONS),
         },

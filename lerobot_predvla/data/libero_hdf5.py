@@ -142,17 +142,30 @@ def scan_suites(hdf5_root: Path | str, suites: list[str]) -> list[DemoRef]:
     return refs
 
 
-def read_demo(ref: DemoRef, frame_stride: int = 1) -> LiberoDemo:
-    """Read one demonstration's arrays (every `frame_stride`-th frame)."""
+def read_demo(ref: DemoRef, frame_stride: int = 1, cameras: bool = True) -> LiberoDemo:
+    """Read one demonstration's arrays (every `frame_stride`-th frame); its images only if `cameras`."""
     key = None
+    image_keys = [f"obs/{k}" for k in HDF5_CAMERAS.values()] if cameras else []
     try:
         with h5py.File(ref.file, "r") as f:
             group = f["data"][ref.demo]
             arrays = {}
-            for key in [ACTION_KEY, JOINT_KEY, GRIPPER_KEY, *(f"obs/{k}" for k in HDF5_CAMERAS.values())]:
+            for key in [ACTION_KEY, JOINT_KEY, GRIPPER_KEY, *image_keys]:
                 arrays[key] = group[key][::frame_stride]
     except (OSError, RuntimeError, KeyError, ValueError) as err:
         raise LiberoDataError(ref.file, f"cannot read data ({err})", ref.demo, key) from err
     state = np.concatenate([arrays[JOINT_KEY], arrays[GRIPPER_KEY]], axis=1).astype(np.float32)
-    images = {camera: arrays[f"obs/{k}"] for camera, k in HDF5_CAMERAS.items()}
+    images = {camera: arrays[f"obs/{k}"] for camera, k in HDF5_CAMERAS.items() if f"obs/{k}" in arrays}
     return LiberoDemo(ref, images, state, arrays[ACTION_KEY].astype(np.float32))
+
+
+def read_sim_states(ref: DemoRef) -> np.ndarray:
+    """One demonstration's flattened simulator states (N, S), each before its step's action."""
+    try:
+        with h5py.File(ref.file, "r") as f:
+            states = f["data"][ref.demo]["states"][()]
+    except (OSError, RuntimeError, KeyError, ValueError) as err:
+        raise LiberoDataError(ref.file, f"cannot read the simulator states ({err})", ref.demo, "states") from err
+    if states.ndim != 2 or len(states) != ref.num_frames:
+        raise LiberoDataError(ref.file, f"shape {states.shape}, expected ({ref.num_frames}, S)", ref.demo, "states")
+    return states

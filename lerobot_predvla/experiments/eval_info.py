@@ -3,6 +3,8 @@
 import json
 from pathlib import Path
 
+from lerobot_predvla.experiments.statistics import task_rates
+
 EVAL_INFO_FILE = "eval_info.json"
 
 
@@ -29,4 +31,4 @@ def parse_eval_info(path: Path) -> dict[str, dict[str, int]]:
 
 def success_rates(path: Path) -> dict[int, float]:
     """Success rate (%) per task id."""
-    return {int(task): 100.0 * t["successes"] / t["episodes"] for task, t in parse_eval_info(path).items()}
+    return {int(task): rate for task, rate in task_rates(parse_eval_info(path)).items()}

@@ -6,14 +6,15 @@ that produced it and which of its configurations are PredVLA with error regressi
 seeds with the seed count (`n = 1` for a single seed, never `± 0`), over the seeds of the configuration's pool when
 other configurations extend it with further seeds (`pool_with`, as `predvla report` gathers them). The departures from
 the paper's protocol are read from the sweep file (demonstrations, front end, training recipe against PredVLAConfig's
-Table 2 defaults) and from the run records (episodes per task, step cap, seeds). Rows whose report does not exist yet
-are left out, so a new experiment leads the table once its `report.json` is committed. A reference row, one
-demonstration replayed blind (`predvla blind-replay`), comes from `results/blind_replay/report.json` when it exists,
-with its per-suite success beside the paper's exact open loop and, on the detailed page, per task beside the leading
-row's exact open loop.
+Table 2 defaults) and from the run records (evaluation starts, episodes per task, step cap, seeds), and listed once
+each, by topic, with the numbers of the rows they apply to. Rows whose report does not exist yet are left out, so a new
+experiment leads the table once its `report.json` is committed. A reference row, one demonstration replayed blind
+(`predvla blind-replay`), comes from `results/blind_replay/report.json` when it exists; on the detailed page its
+per-suite success is set beside the paper's exact open loop, and per task beside the leading row's exact open loop.
 
-`predvla report --docs` rewrites the block between HEADLINE_START and HEADLINE_END in README.md (the summary table)
-and docs/results.md (the summary table and a per-seed table), and the configs and model card of every shipped
+`predvla report --docs` rewrites the block between HEADLINE_START and HEADLINE_END in README.md (the summary table
+and the departures) and docs/results.md (the same with what each departure departs from, the blind replay per suite
+and task, and a per-seed table), and the configs and model card of every shipped
 checkpoint (`lerobot_predvla.hub.upload.shipped_checkpoints`: `checkpoints/<name>/` and the models sweeps publish) as
 every publishing route writes them (`lerobot_predvla.hub.upload.repository_files`); `--check` fails when any differs.
 """
@@ -22,13 +23,13 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from lerobot_predvla.columns import SUITES
-from lerobot_predvla.experiments.report import MISSING, SUMMARY_FILE, ReportError, run_episodes
-from lerobot_predvla.experiments.sweep import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
+from lerobot_predvla.experiments.formatting import MISSING, fmt_mean_std, fmt_rate, table
+from lerobot_predvla.experiments.report.results import SUMMARY_FILE, ReportError, run_episodes
+from lerobot_predvla.experiments.statistics import episode_totals, mean_std
+from lerobot_predvla.experiments.sweep.spec import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
 from lerobot_predvla.hub.upload import repository_files, shipped_checkpoints
-from lerobot_predvla.policies.recipe import config_departures
+from lerobot_predvla.policies.recipe import Departure, config_departures
 from lerobot_predvla.sims.libero.protocol import (
     PAPER_EPISODE_LENGTH,
     PAPER_EPISODES_PER_TASK,
@@ -52,6 +53,10 @@ BASELINE_COLUMNS = ("bc_rnn", "bc_transformer")
 PAPER_OPEN_LOOP = {"libero_spatial": 73.79, "libero_object": 78.14, "libero_goal": 78.50, "libero_10": 28.00}
 BLIND_REPLAY = "blind_replay"  # results/blind_replay/report.json, written by `predvla blind-replay`
 BLIND_SECOND = "nearest_mean_plan"  # its second plan's key (lerobot_predvla.sims.libero.blind_replay.NEAREST_MEAN_KEY)
+# What each departure from the paper is about, in the order the departures table lists them.
+TOPICS = ("benchmark", "demonstrations", "front end", "training", "evaluation starts", "episodes per task", "step cap",
+          "training seeds")
+EVERY_ROW = [("benchmark", Departure("libero_object only", "the paper: four suites"))]
 
 
 @dataclass(frozen=True)
@@ -96,24 +101,23 @@ class Cell:
         return len(self.rates)
 
     def mean(self) -> float | None:
-        return float(np.mean(list(self.rates.values()))) if self.rates else None
+        return mean_std(list(self.rates.values()))[0]
 
     def text(self) -> str:
         if not self.rates:
             return MISSING
-        values = list(self.rates.values())
-        if len(values) == 1:
-            return f"{values[0]:.1f} (n = 1)"
-        return f"{np.mean(values):.1f} ± {np.std(values, ddof=1):.1f} (n = {len(values)})"
+        return fmt_mean_std(*mean_std(list(self.rates.values())), self.n, digits=1, count=True)
 
 
 @dataclass
 class Row:
+    """A headline row: `number` counts the rows from 1, `departures` are (topic, departure) in TOPICS order."""
+
+    number: int
     experiment: Experiment
     cells: dict[str, Cell]
     demonstrations: str
-    departures: list[str]
-    protocol: str
+    departures: list[tuple[str, Departure]]
 
 
 def _records(results_dir: Path, config: str) -> dict[int, dict]:
@@ -156,17 +160,18 @@ def _policy_fields(sweep: Sweep, config: str, seen: frozenset = frozenset()) -> 
     return {**trained, **{k: str(v) for k, v in spec.eval_overrides.items()}}, steps
 
 
-def recipe_departures(sweep: Sweep, config: str) -> list[str]:
+def recipe_departures(sweep: Sweep, config: str) -> list[Departure]:
     """What the training and inference settings of a PredVLA configuration change from Table 2."""
     values, steps = _policy_fields(sweep, config)
     out = config_departures(values)
     batch = sweep.settings.batch_size
     if steps != PAPER_TRAIN_STEPS or batch != PAPER_BATCH_SIZE:
-        out.insert(0, f"{steps:,} steps at batch {batch} (Table 2: {PAPER_TRAIN_STEPS:,} at {PAPER_BATCH_SIZE})")
+        out.insert(0, Departure(f"{steps:,} steps at batch {batch}",
+                                f"Table 2: {PAPER_TRAIN_STEPS:,} at {PAPER_BATCH_SIZE}"))
     return out
 
 
-def _demonstrations(sweep: Sweep) -> tuple[str, list[str]]:
+def _demonstrations(sweep: Sweep) -> tuple[str, list[tuple[str, Departure]]]:
     data = sweep.settings.data.get(SUITE)
     if data is None:
         raise ReportError(f"sweep file: no `data.{SUITE}` section (how the demonstrations were made).")
@@ -177,28 +182,29 @@ def _demonstrations(sweep: Sweep) -> tuple[str, list[str]]:
         words.append("one wrist branch")
     if data.hold_steps:
         words.append(f"{data.hold_steps}-step holds")
-    departures = [f"scripted-expert demonstrations, {data.per_task} per task (the paper: LIBERO's "
-                  f"{PAPER_DEMOS_PER_TASK} human ones)"]
+    departures = [("demonstrations", Departure(f"scripted-expert, {data.per_task} per task",
+                                               f"the paper: LIBERO's {PAPER_DEMOS_PER_TASK} human ones"))]
     if data.vision_weights == "random":
-        departures.append("a randomly initialised ResNet18 in the front end (the paper: ImageNet weights)")
+        departures.append(("front end", Departure("a randomly initialised ResNet18", "the paper: ImageNet weights")))
     return ", ".join(words), departures
 
 
-def _protocol(cells: dict[str, Cell]) -> tuple[str, list[str]]:
+def _protocol(cells: dict[str, Cell]) -> list[tuple[str, Departure]]:
     records = [r for c in cells.values() for r in c.records.values()]
     episodes = sorted({int(r["n_episodes_per_task"]) for r in records})
     caps = sorted({int(r["episode_length"]) for r in records})
-    official = all(r.get("init_states", True) is not False for r in records)
-    text = "from the official init states" if official else "from randomised resets"
     departures = []
+    if any(r.get("init_states", True) is False for r in records):
+        departures.append(("evaluation starts", Departure("randomised resets", "the paper: the official init states")))
     if episodes != [PAPER_EPISODES_PER_TASK]:
-        departures.append(f"{'/'.join(map(str, episodes))} episodes per task (the paper: {PAPER_EPISODES_PER_TASK})")
+        departures.append(("episodes per task", Departure("/".join(map(str, episodes)),
+                                                          f"the paper: {PAPER_EPISODES_PER_TASK}")))
     if caps != [PAPER_EPISODE_LENGTH]:
-        departures.append(f"a {'/'.join(map(str, caps))}-step cap (the paper: {PAPER_EPISODE_LENGTH})")
+        departures.append(("step cap", Departure("/".join(map(str, caps)), f"the paper: {PAPER_EPISODE_LENGTH}")))
     seeds = cells["error_regression"].n
     if seeds != PAPER_SEEDS:
-        departures.append(f"{seeds} training seed{'s' if seeds != 1 else ''} (the paper: {PAPER_SEEDS})")
-    return text, departures
+        departures.append(("training seeds", Departure(str(seeds), f"the paper: {PAPER_SEEDS}")))
+    return departures
 
 
 def build_rows(root: Path) -> list[Row]:
@@ -216,29 +222,26 @@ def build_rows(root: Path) -> list[Row]:
         cells = {key: _cell(results_dir, summary, getattr(exp, key)) for key, _ in COLUMNS}
         if not cells["error_regression"].n:
             continue
-        demonstrations, departures = _demonstrations(sweep)
-        protocol, protocol_departures = _protocol(cells)
-        departures += recipe_departures(sweep, exp.error_regression) + protocol_departures
-        rows.append(Row(exp, cells, demonstrations, departures, protocol))
+        demonstrations, data_departures = _demonstrations(sweep)
+        departures = [*EVERY_ROW, *data_departures,
+                      *[("training", d) for d in recipe_departures(sweep, exp.error_regression)],
+                      *_protocol(cells)]
+        rows.append(Row(len(rows) + 1, exp, cells, demonstrations, departures))
     if not rows:
         raise ReportError(f"{root}/results: no report.json of {[e.results for e in EXPERIMENTS]}.")
     return rows
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    return "\n".join([*lines, *["| " + " | ".join(r) + " |" for r in rows]])
-
-
 def _paper_cell(key: str) -> str:
     mean, std, seeds = PAPER_OBJECT[key]
-    return f"{mean:.2f} ± {std:.2f}" + (f" (n = {seeds})" if seeds else "")
+    return fmt_mean_std(mean, std, seeds, count=True)
 
 
 def row_label(row: Row, prefix: str) -> str:
     """`prefix`: the path from the document to the repository root ("" for README.md, "../" for docs/)."""
     link = f"{prefix}results/{row.experiment.results}/report.md"
-    return f"[{row.experiment.recipe}]({prefix}docs/glossary.md#recipes); {row.demonstrations} ([report]({link}))"
+    return (f"{row.number}. [{row.experiment.recipe}]({prefix}docs/glossary.md#recipes); {row.demonstrations} "
+            f"([report]({link}))")
 
 
 def summary_table(rows: list[Row], prefix: str, blind: dict | None = None) -> str:
@@ -248,7 +251,7 @@ def summary_table(rows: list[Row], prefix: str, blind: dict | None = None) -> st
         body.append([blind_label(blind[SUITE], prefix),
                      *[blind_cell(blind[SUITE]) if key == "open_loop" else MISSING for key, _ in COLUMNS]])
     body += [[row_label(row, prefix), *[row.cells[key].text() for key, _ in COLUMNS]] for row in rows]
-    return _table(["libero_object success (%), mean over training seeds", *[name for _, name in COLUMNS]], body)
+    return table(["libero_object success (%), mean over training seeds", *[name for _, name in COLUMNS]], body)
 
 
 # ----- the reference row: one demonstration replayed blind (`predvla blind-replay`) ----------------------------
@@ -268,12 +271,7 @@ def load_blind_replay(root: Path) -> dict | None:
 
 
 def blind_totals(tasks: dict, second: bool = False) -> tuple[int, int]:
-    rows = [t[BLIND_SECOND] if second else t for t in tasks.values()]
-    return sum(int(r["successes"]) for r in rows), sum(int(r["episodes"]) for r in rows)
-
-
-def _rate(successes: int, episodes: int) -> str:
-    return f"{100 * successes / episodes:.1f} ({successes}/{episodes})" if episodes else MISSING
+    return episode_totals(t[BLIND_SECOND] if second else t for t in tasks.values())
 
 
 def _states_text(states: list[int]) -> str:
@@ -298,7 +296,8 @@ def blind_label(tasks: dict, prefix: str) -> str:
 
 def blind_cell(tasks: dict) -> str:
     """Success of the state-0 plan, then of the nearest-mean start's plan, pooled over the suite's tasks."""
-    return f"{_rate(*blind_totals(tasks))}; from the nearest-mean start {_rate(*blind_totals(tasks, second=True))}"
+    nearest_mean = fmt_rate(*blind_totals(tasks, second=True))
+    return f"{fmt_rate(*blind_totals(tasks))}; from the nearest-mean start {nearest_mean}"
 
 
 def blind_suite_table(blind: dict) -> str:
@@ -306,9 +305,9 @@ def blind_suite_table(blind: dict) -> str:
     for suite in SUITES:
         tasks = blind.get(suite, {})
         body.append([f"{suite} ({SUITE_LABELS[suite]})", f"{PAPER_OPEN_LOOP[suite]:.2f}",
-                     _rate(*blind_totals(tasks)) if tasks else "not run",
-                     _rate(*blind_totals(tasks, second=True)) if tasks else "not run", str(len(tasks))])
-    return _table(["suite", "paper, exact open loop (Table 6, A6), %", "one demonstration replayed blind: plan from "
+                     fmt_rate(*blind_totals(tasks)) if tasks else "not run",
+                     fmt_rate(*blind_totals(tasks, second=True)) if tasks else "not run", str(len(tasks))])
+    return table(["suite", "paper, exact open loop (Table 6, A6), %", "one demonstration replayed blind: plan from "
                    "official init state 0, % (successes/episodes)", "plan from the nearest-mean start, %",
                    "tasks run"], body)
 
@@ -350,19 +349,19 @@ def blind_task_table(blind: dict, row: Row | None, open_loop: dict[str, tuple[in
             s, n = open_loop.get(task_id, (0, 0))
             cells.append(f"{s}/{n}" if n else MISSING)
         body.append(cells)
-    return _table(header, body)
+    return table(header, body)
 
 
-def blind_text(root: Path, blind: dict | None, rows: list[Row], detailed: bool) -> list[str]:
-    """The sentence (and, `detailed`, the tables) that set one demonstration replayed blind beside the paper's exact
-    open loop per suite and a row's exact open loop per task."""
+def blind_text(root: Path, blind: dict | None, rows: list[Row]) -> list[str]:
+    """The sentence and tables that set one demonstration replayed blind beside the paper's exact open loop per suite
+    and a row's exact open loop per task."""
     if not blind:
         return []
     parts = ["", "One demonstration replayed blind (a reference, not a policy: the scripted expert's actions from one "
              "official init state of each task, replayed action by action with no observation on other official "
              "init states, then idle up to the cap) against the paper's exact open loop, per suite:", "",
              blind_suite_table(blind)]
-    if detailed and SUITE in blind:
+    if SUITE in blind:
         row = next((r for r in rows if r.cells["open_loop"].n), None)
         open_loop = open_loop_per_task(root, row) if row else {}
         parts += ["", f"Per task on libero_object: the blind replays on {blind_protocol(blind[SUITE])}"
@@ -397,16 +396,36 @@ def plain_sentence(rows: list[Row]) -> str:
                "these runs do not reproduce the paper's ordering.") + "\n")
 
 
-def departures_text(rows: list[Row], prefix: str) -> list[str]:
-    common = [d for d in rows[0].departures if all(d in r.departures for r in rows)]
-    starts = f"[starts]({prefix}docs/glossary.md#official-init-states)"
-    lines = ["Departures from the paper in every row: libero_object only (the paper: four suites); "
-             + "; ".join(common) + f". The evaluation {starts} and further departures of each row:", ""]
+def row_numbers(numbers: list[int], rows: int) -> str:
+    """`all` of `rows` rows, or the numbers, three or more in a row as a range: `1, 5`, `2-6`."""
+    if len(numbers) == rows:
+        return "all"
+    runs: list[list[int]] = []
+    for number in numbers:
+        if runs and number == runs[-1][-1] + 1:
+            runs[-1].append(number)
+        else:
+            runs.append([number])
+    return ", ".join(f"{run[0]}-{run[-1]}" if len(run) > 2 else ", ".join(map(str, run)) for run in runs)
+
+
+def departures_table(rows: list[Row], prefix: str, detailed: bool) -> list[str]:
+    """Every departure from the paper once, by topic, with the rows it applies to; `detailed` adds what it departs
+    from (the README links there)."""
+    applies: dict[tuple[str, Departure], list[int]] = {}
     for row in rows:
-        own = [d for d in row.departures if d not in common]
-        lines.append(f"- {row.experiment.recipe}, {row.demonstrations}: {row.protocol}"
-                     + (f"; {'; '.join(own)}" if own else "") + ".")
-    return lines
+        for item in row.departures:
+            applies.setdefault(item, []).append(row.number)
+    body, shown = [], None
+    for (topic, departure), numbers in sorted(applies.items(), key=lambda item: TOPICS.index(item[0][0])):
+        body.append([topic if topic != shown else "", departure.label,
+                     *([departure.reference] if detailed else []), row_numbers(numbers, len(rows))])
+        shown = topic
+    starts = f"[official init states]({prefix}docs/glossary.md#official-init-states)"
+    against = ", against what each departs from:" if detailed else (
+        f"; what each departs from: [docs/results.md]({prefix}docs/results.md#libero-libero_object-against-the-paper).")
+    return [f"How the rows depart from the paper (each evaluated from the {starts} unless listed here){against}", "",
+            table(["", "departure", *(["against"] if detailed else []), "rows"], body)]
 
 
 def seed_table(rows: list[Row]) -> str:
@@ -414,17 +433,19 @@ def seed_table(rows: list[Row]) -> str:
     for row in rows:
         for key, name in COLUMNS:
             for seed, record in row.cells[key].records.items():
-                body.append([f"{row.experiment.recipe}; {row.demonstrations}", name, record["config"], str(seed),
+                body.append([f"{row.number}. {row.experiment.recipe}; {row.demonstrations}", name, record["config"],
+                             str(seed),
                              f"{record['successes']}/{record['episodes']}",
                              f"{record['n_episodes_per_task']} per task, {record['episode_length']}-step cap"])
-    return _table(["row", "column", "configuration", "training seed", "successes", "protocol"], body)
+    return table(["row", "column", "configuration", "training seed", "successes", "protocol"], body)
 
 
 def render(rows: list[Row], prefix: str, detailed: bool, blind: dict | None = None, root: Path | None = None) -> str:
     parts = [HEADLINE_START, "", summary_table(rows, prefix, blind), "", plain_sentence(rows),
-             *departures_text(rows, prefix), *blind_text(root, blind, rows, detailed)]
+             *departures_table(rows, prefix, detailed)]
     if detailed:
-        parts += ["", "Every seed behind the table (its run record under `results/<row>/runs/records/`):", "",
+        parts += [*blind_text(root, blind, rows), "",
+                  "Every seed behind the table (its run record under `results/<row>/runs/records/`):", "",
                   seed_table(rows)]
     return "\n".join([*parts, "", HEADLINE_END])
 

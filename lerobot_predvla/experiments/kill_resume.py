@@ -41,12 +41,12 @@ import torch
 from lerobot.utils.constants import CHECKPOINTS_DIR, LAST_CHECKPOINT_LINK, PRETRAINED_MODEL_DIR, TRAINING_STATE_DIR
 from safetensors.torch import load_file
 
+from lerobot_predvla import lerobot_commands
 from lerobot_predvla.data.synthetic import make_synthetic_dataset
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 from lerobot_predvla.utils.checkpoints import KILL_AT_ENV, KILL_POINTS
 from lerobot_predvla.utils.io import atomic_write_json
 
-LEROBOT_TRAIN = str(Path(sys.executable).with_name("lerobot-train"))
 _STEP_LINE = re.compile(r"step:(\d+) .* loss:([-+0-9.eE]+|nan)")
 _RESUMED = re.compile(r"Resuming data order at epoch")
 _POLL_S = 0.05
@@ -88,16 +88,15 @@ class Kill:
 
 
 def train_command(cfg: HarnessConfig, out: Path, resume: bool) -> list[str]:
-    cmd = [
-        LEROBOT_TRAIN, "--policy.type=predvla", f"--dataset.repo_id={cfg.repo_id}",
-        f"--dataset.root={cfg.dataset_root}", "--policy.push_to_hub=false", "--policy.device=cpu", "--num_workers=0",
-        f"--steps={cfg.steps}",
-        f"--save_freq={cfg.save_freq}", "--log_freq=1", f"--batch_size={cfg.batch_size}", "--wandb.enable=false",
-        f"--policy.sequence_length={cfg.sequence_length}", f"--output_dir={out}", f"--seed={cfg.seed}",
-        *cfg.extra_args,
-    ]
+    """An attempt's whole `lerobot-train` command, with the resume flags from `checkpoints/last` when `resume`."""
+    cmd = lerobot_commands.train_command(
+        policy=lerobot_commands.policy_args("predvla", {"sequence_length": cfg.sequence_length}),
+        dataset_repo_id=cfg.repo_id, dataset_root=cfg.dataset_root, output_dir=out, seed=cfg.seed, steps=cfg.steps,
+        batch_size=cfg.batch_size, save_freq=cfg.save_freq, device="cpu",
+        extra=["--num_workers=0", "--log_freq=1", *cfg.extra_args],
+    )
     if resume:
-        cmd += ["--resume=true", f"--config_path={out / CHECKPOINTS_DIR / LAST_CHECKPOINT_LINK / PRETRAINED_MODEL_DIR}"]
+        cmd += lerobot_commands.resume_args(out / CHECKPOINTS_DIR / LAST_CHECKPOINT_LINK / PRETRAINED_MODEL_DIR)
     return cmd
 
 

@@ -1,6 +1,6 @@
 """Learning-rate selection on held-out demonstrations, never on the evaluation's init states.
 
-The paper's baselines train "at the best of a four-point learning-rate sweep" (Section 4.4) without saying how
+The paper's baselines train "at the best of a four-point learning-rate sweep" (Section 4.5) without saying how
 "best" was judged. A sweep configuration with `lr_sweep` judges it on demonstrations the candidate did not train
 on: one shorter `lerobot-train` run per rate with `--dataset.eval_split=f --eval_steps=n`. LeRobot 0.6.1 then holds
 out the last ceil(f x episodes) episodes of every task (`lerobot.datasets.factory.make_train_eval_datasets`),

@@ -9,6 +9,7 @@ import numpy as np
 from safetensors.numpy import load_file, save_file
 
 from lerobot_predvla.frontend.language import LANGUAGE_ENCODER_DIM, LANGUAGE_ENCODER_NAME
+from lerobot_predvla.frontend.oracle import OracleStandardisation
 from lerobot_predvla.frontend.pca import PCABasis
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import VISION_ENCODER_DIM, VISION_ENCODER_NAME, VisionWeights
@@ -40,6 +41,8 @@ class FrontendArtefact:
         language_fingerprint: SHA-256 of the sentence encoder's weights; loading checks it.
         preprocessing: The image preprocessing.
         fit: Provenance of the fit (suites, files, demonstrations, frames, instructions).
+        oracle: Set only in a dataset converted with `predvla convert --oracle`: its visual features are the
+            oracle's standardised object poses (`frontend.oracle`), not the cameras' PCA features.
     """
 
     language: PCABasis
@@ -51,6 +54,7 @@ class FrontendArtefact:
     language_fingerprint: str
     preprocessing: PreprocessingSpec
     fit: dict = field(default_factory=dict)
+    oracle: OracleStandardisation | None = None
 
     @property
     def language_dim(self) -> int:
@@ -62,6 +66,9 @@ class FrontendArtefact:
 
     @property
     def vision_dim(self) -> int:
+        """Size of the visual feature: the cameras' PCA components, or the oracle's poses."""
+        if self.oracle is not None:
+            return self.oracle.dim
         return sum(basis.n_components for basis in self.cameras.values())
 
     def _bases(self) -> dict[str, PCABasis]:
@@ -99,6 +106,7 @@ class FrontendArtefact:
             },
             "preprocessing": self.preprocessing.to_dict(),
             "fit": self.fit,
+            **({"oracle": self.oracle.metadata()} if self.oracle is not None else {}),
         }
 
     def tensors(self) -> dict[str, np.ndarray]:
@@ -172,6 +180,12 @@ class FrontendArtefact:
             return PCABasis(**arrays, components_with_variance=info["components_with_variance"],
                             num_samples=info["num_samples"])
 
+        def oracle(info: dict) -> OracleStandardisation:
+            try:
+                return OracleStandardisation.from_metadata(info)
+            except ValueError as err:
+                raise FrontendArtefactError(f"{where}: {err}") from err
+
         vision = meta["vision"]
         return cls(
             language=basis("language", meta["language"]),
@@ -183,6 +197,7 @@ class FrontendArtefact:
             language_fingerprint=meta["language"]["fingerprint_sha256"],
             preprocessing=PreprocessingSpec.from_dict(meta["preprocessing"]),
             fit=meta["fit"],
+            oracle=oracle(meta["oracle"]) if "oracle" in meta else None,
         )
 
     def check_dims(

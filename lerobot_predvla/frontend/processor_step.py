@@ -8,11 +8,12 @@ import torch
 from lerobot.configs.types import FeatureType, PipelineFeatureType, PolicyFeature
 from lerobot.lerobot_types import EnvTransition, TransitionKey
 from lerobot.processor import ProcessorStep, ProcessorStepRegistry
-from lerobot.utils.constants import OBS_IMAGES
+from lerobot.utils.constants import OBS_ENV_STATE, OBS_IMAGES
 
 from lerobot_predvla.columns import OBS_IMAGE_FRESH, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.frontend.artefact import FrontendArtefact, FrontendArtefactError
 from lerobot_predvla.frontend.frozen import FrozenFrontend
+from lerobot_predvla.frontend.oracle import OracleStandardisation
 from lerobot_predvla.utils.threads import acting_threads
 
 CAMERA_PREFIX = f"{OBS_IMAGES}."
@@ -40,6 +41,10 @@ class FrontendProcessorStep(ProcessorStep):
     non-finite pixels cannot be encoded: that environment's visual features become NaN for the step, which
     the policy treats as an unavailable observation (masked out of the free energy, `on_bad_observation`);
     the other environments are encoded as usual. An empty task is an error naming `--task`.
+
+    A policy trained with the oracle front end (`predvla convert --oracle`, a diagnostic) takes its visual
+    features from the simulator's object poses relative to the gripper (`observation.environment_state`, from
+    `--env.type=predvla_libero --env.oracle=true`), standardised as in the converter, instead of the cameras.
 
     The artefact's JSON description is this step's config and its PCA arrays are its state, so the front
     end is saved with every checkpoint (`policy_preprocessor*.json/.safetensors`) and pushed with it.
@@ -116,12 +121,16 @@ class FrontendProcessorStep(ProcessorStep):
     def _encode(self, transition: EnvTransition, observation: dict, tasks: list[str],
                 device: torch.device) -> EnvTransition:
         frontend = self.frontend(device)
+        oracle = frontend.artefact.oracle
         fresh = observation.get(OBS_IMAGE_FRESH)
-        if self._vision is None:
+        if self._vision is None and oracle is None:
             self._check_cameras(observation)
         refresh = self._tick % self.refresh_interval == 0 if fresh is None else bool(torch.as_tensor(fresh).any())
         if self._vision is None or refresh:
-            self._vision = self._encode_frame(frontend, observation, len(tasks)).to(device)
+            if oracle is None:
+                self._vision = self._encode_frame(frontend, observation, len(tasks)).to(device)
+            else:
+                self._vision = self._oracle_frame(oracle, observation).to(device)
         self._tick += 1
         for text in set(tasks) - set(self._language):
             self._language[text] = frontend.encode_instructions([text])[0]
@@ -179,13 +188,32 @@ class FrontendProcessorStep(ProcessorStep):
             vision = frontend.encode_images(images)
         return torch.where(bad[:, None].to(vision.device), torch.full((), float("nan")), vision)
 
+    @staticmethod
+    def _oracle_frame(oracle: OracleStandardisation, observation: dict) -> torch.Tensor:
+        """The oracle's standardised object poses (batch, dim); NaN rows where a pose is non-finite."""
+        if OBS_ENV_STATE not in observation:
+            raise KeyError(
+                f"This PredVLA policy was trained with the oracle front end (simulator object poses, `predvla convert "
+                f"--oracle`): it needs '{OBS_ENV_STATE}'; evaluate it with --env.type=predvla_libero --env.oracle=true."
+            )
+        poses = torch.as_tensor(observation[OBS_ENV_STATE]).float()
+        poses = poses[None] if poses.dim() == 1 else poses
+        if poses.shape[-1] != oracle.dim:
+            raise ValueError(f"'{OBS_ENV_STATE}' has {poses.shape[-1]} values per step; the oracle front end was "
+                             f"fitted on {oracle.dim} (objects {oracle.objects}).")
+        bad = ~torch.isfinite(poses).all(-1, keepdim=True)
+        return torch.where(bad, torch.full((), float("nan")), oracle.apply(poses))
+
     def transform_features(
         self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
     ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
         if self.artefact is None:
             return features
         observation = dict(features.get(PipelineFeatureType.OBSERVATION, {}))
-        vision_dim = sum(cam["n_components"] for cam in self.artefact["vision"]["cameras"].values())
+        if "oracle" in self.artefact:
+            vision_dim = len(self.artefact["oracle"]["mean"])
+        else:
+            vision_dim = sum(cam["n_components"] for cam in self.artefact["vision"]["cameras"].values())
         observation[OBS_VISION_FEATURES] = PolicyFeature(type=FeatureType.STATE, shape=(vision_dim,))
         observation[OBS_LANGUAGE_FEATURES] = PolicyFeature(
             type=FeatureType.STATE, shape=(self.artefact["language"]["n_components"],)

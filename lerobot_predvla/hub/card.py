@@ -20,6 +20,7 @@ from lerobot.utils.constants import POLICY_PREPROCESSOR_DEFAULT_NAME
 
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.frontend.artefact import METADATA_FILE
+from lerobot_predvla.lerobot_commands import eval_command as lerobot_eval
 from lerobot_predvla.policies import POLICY_TYPES
 from lerobot_predvla.policies.ladder.configuration_predvla_ladder import PREDICTIVE_RUNGS
 from lerobot_predvla.policies.recipe import NOT_RECIPE, config_defaults, config_departures, differs
@@ -130,11 +131,9 @@ def eval_command(policy_path: str, suite: str, episode_length: int = PAPER_EPISO
                  episodes_per_task: int = PAPER_EPISODES_PER_TASK) -> str:
     """`lerobot-eval` of `policy_path` (a Hub repo or a local directory) from the official init states, the paper's
     protocol by default; LeRobot picks the device."""
-    return (
-        f"lerobot-eval --policy.path={policy_path} --env.type={EVAL_ENV_TYPE} --env.task={suite} "
-        f"--env.episode_length={episode_length} --eval.n_episodes={episodes_per_task} "
-        "--eval.batch_size=1 --eval.use_async_envs=false --output_dir=outputs/eval"
-    )
+    return " ".join(lerobot_eval(program="lerobot-eval", checkpoint=policy_path, env_type=EVAL_ENV_TYPE, suite=suite,
+                                 episode_length=episode_length, n_episodes=episodes_per_task, batch_size=1,
+                                 output_dir="outputs/eval"))
 
 
 def eval_protocol(main: dict | None) -> str:
@@ -320,7 +319,7 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None, co
     departures = config_departures(config)
     if departures:
         lines += ["", "Departures from the configuration class's defaults (for PredVLA: the paper's Table 2): "
-                  + "; ".join(departures) + "."]
+                  + "; ".join(map(str, departures)) + "."]
     return "\n".join(lines)
 
 

@@ -3,7 +3,7 @@
 Used by the model card (hub/card.py), the headline table (experiments/headline.py) and the sweep runner.
 """
 
-from dataclasses import MISSING, fields
+from dataclasses import MISSING, dataclass, fields
 
 from lerobot.configs.policies import PreTrainedConfig
 
@@ -11,6 +11,18 @@ from lerobot.configs.policies import PreTrainedConfig
 NOT_RECIPE = frozenset({"type", "push_to_hub", "device", "recurrence_backend", "use_amp", "repo_id"})
 # PredVLA defaults that Table 2 does not give a value for (the open choices of docs/paper.md).
 UNSTATED_IN_TABLE2 = {"grad_clip_norm"}
+
+
+@dataclass(frozen=True)
+class Departure:
+    """One way a run departs from the paper: what it does (`label`, e.g. `lambda_q = 100`) and what it departs from
+    (`reference`, e.g. `Table 2: 1`)."""
+
+    label: str
+    reference: str
+
+    def __str__(self) -> str:
+        return f"{self.label} ({self.reference})"
 
 
 def format_number(value) -> str:
@@ -39,10 +51,10 @@ def config_defaults(policy_type: str) -> dict:
     return {f.name: f.default for f in fields(config_cls) if f.default is not MISSING}
 
 
-def config_departures(values: dict) -> list[str]:
-    """`field = value (Table 2: default)` for every recipe field of a policy config (`config.json`, or `--policy.*`
-    values with `type`) that differs from its config class's default (PredVLA's are Table 2's, but for the values
-    Table 2 does not give)."""
+def config_departures(values: dict) -> list[Departure]:
+    """`field = value` against `Table 2: default` for every recipe field of a policy config (`config.json`, or
+    `--policy.*` values with `type`) that differs from its config class's default (PredVLA's are Table 2's, but for
+    the values Table 2 does not give)."""
     defaults = config_defaults(values["type"])
     paper = values["type"] == "predvla"
 
@@ -51,6 +63,6 @@ def config_departures(values: dict) -> list[str]:
             return f"default: {format_number(defaults[k])}; Table 2 gives no value"
         return f"{'Table 2' if paper else 'default'}: {format_number(defaults[k])}"
 
-    return [f"{k} = {format_number(v)} ({reference(k)})"
+    return [Departure(f"{k} = {format_number(v)}", reference(k))
             for k, v in sorted(values.items())
             if k in defaults and k not in NOT_RECIPE and differs(v, defaults[k])]

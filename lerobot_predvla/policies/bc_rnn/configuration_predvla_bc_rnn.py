@@ -1,4 +1,4 @@
-"""Configuration of baseline B2, BC-RNN (LSTM), on PredVLA's cached inputs (Section 4.4, Table 4)."""
+"""Configuration of baseline B2, BC-RNN (LSTM), on PredVLA's cached inputs (Section 4.5, Table 4)."""
 
 from dataclasses import dataclass
 
@@ -14,15 +14,14 @@ BC_RNN_PAPER_PARAMETERS = 674_276  # Table 4, B2
 class PredVLABCRNNConfig(ObservationPolicyConfig):
     """BC-RNN (robomimic-style): an LSTM over [held vision 192; proprio 9; language 64] with PredVLA's GMM head.
 
-    Parameter reading: torch `nn.LSTM(265, 272)` (one layer, both bias vectors, zero initial state) and the
-    two-layer GMM head Linear(272, 256)-ReLU-Linear(256, 75) give 675,595 trainable parameters, 1,319 (+0.20%)
-    above the paper's 674,276 (width 271: 672,099, -0.32%). No natural reading we found (one or more layers,
-    one or two bias vectors, learnable initial states, input embedding) is exact. Fields of the base class are
-    documented in `ObservationPolicyConfig`.
+    The paper gives B2's parameter count (Table 4: 674,276) but not its layout. Ours is torch's `nn.LSTM(265, 272)`
+    (one layer, both bias vectors, zero initial state) and the GMM head Linear(272, 256)-ReLU-Linear(256, 75):
+    675,595 trainable parameters, +0.20% (docs/paper.md). Fields of the base class are documented in
+    `ObservationPolicyConfig`.
 
     Args:
-        hidden_dim: LSTM state size (272: the closest to Table 4's count).
-        num_layers: Stacked LSTM layers (1).
+        hidden_dim: LSTM state size (default 272, our choice: the width closest to Table 4's count).
+        num_layers: Stacked LSTM layers (default 1, our choice; the paper does not give it).
     """
 
     hidden_dim: int = 272

@@ -1,4 +1,4 @@
-"""Baseline B2, BC-RNN: an LSTM policy on PredVLA's cached inputs with its GMM action head (Section 4.4)."""
+"""Baseline B2, BC-RNN: an LSTM policy on PredVLA's cached inputs with its GMM action head (Section 4.5)."""
 
 from torch import Tensor, nn
 

@@ -1,4 +1,4 @@
-"""Configuration of baselines B1, B3 and B4: causal BC-Transformer on PredVLA's cached inputs (Section 4.4)."""
+"""Configuration of baselines B1, B3 and B4: causal BC-Transformer on PredVLA's cached inputs (Section 4.5)."""
 
 from dataclasses import dataclass
 
@@ -19,28 +19,25 @@ class PredVLABCTransformerConfig(ObservationPolicyConfig):
     `num_layers` pre-norm torch TransformerEncoderLayers (D, `num_heads`, `feedforward_dim`, ReLU), a final
     LayerNorm, and PredVLA's GMM head Linear(D, 256)-ReLU-Linear(256, K (1 + 2 * 7 * chunk_size)) at every
     position. With action chunks the K mixture weights are shared by the whole chunk and each component has a
-    mean and scale per chunk step; this is the reading under which Table 4's differences are exact: B3 - B1 =
-    7 x 17,990 and B4 - B1 = 15 x 17,990, with 17,990 = 257 x 70 per extra chunk step.
-
-    Counts (ours / paper): chunk 1: 646,155 / 646,628 (-0.07%); chunk 8: 772,085 / 772,558 (-0.06%);
-    chunk 16: 916,005 / 916,478 (-0.05%). The trunk reading (D=160, 2 layers, feed-forward 512, context 40,
-    the error-regression window) is ours: no natural trunk we found gives B1's count exactly.
+    mean and scale per chunk step: the reading under which Table 4's differences between B1, B3 and B4 are exact.
+    The paper gives only the parameter counts; the trunk's sizes are ours, within 0.07% of them (docs/paper.md).
 
     Training samples one window per batch episode, ending at a uniformly drawn valid step, and scores the
     action NLL at every valid position (robomimic's BC-Transformer). Chunk targets past an episode's end repeat
     its last action. Acting keeps the last `context_length` steps; with chunks, the actions predicted for the
-    current step by the last chunks are averaged by ACT's temporal ensembling.
+    current step by the last chunks are averaged by ACT's temporal ensembling (Section 4.5).
 
     Args:
-        embed_dim: Token width D (160).
-        num_layers: Transformer encoder layers (2).
-        num_heads: Attention heads (4).
-        feedforward_dim: Hidden width of each layer's feed-forward block (512).
-        dropout: Dropout inside the encoder layers (0.1).
-        context_length: Steps the causal window covers, in training and at evaluation (40, PredVLA's W).
-        chunk_size: Actions predicted per step: 1 (B1), 8 (B3) or 16 (B4).
-        temporal_ensemble_coeff: ACT temporal-ensembling coefficient m of w_i = exp(-m i) (ACT's 0.01); used
-            when chunk_size > 1.
+        embed_dim: Token width D (default 160, ours; Table 4 gives only the parameter count).
+        num_layers: Transformer encoder layers (default 2, ours).
+        num_heads: Attention heads (default 4, ours); must divide `embed_dim`.
+        feedforward_dim: Hidden width of each layer's feed-forward block (default 512, ours).
+        dropout: Dropout probability inside the encoder layers (default 0.1, ours).
+        context_length: Steps the causal window covers, in training and at evaluation (default 40, ours: PredVLA's
+            error-regression window W of Table 2).
+        chunk_size: Actions predicted per step: 1 (default, B1), 8 (B3) or 16 (B4) (Section 4.5; Table 4).
+        temporal_ensemble_coeff: Coefficient m of ACT's temporal-ensembling weights w_i = exp(-m i), used when
+            `chunk_size` > 1 (default 0.01, ACT's; Section 4.5 names ACT-style ensembling without a value).
     """
 
     embed_dim: int = 160

@@ -1,4 +1,4 @@
-"""Baselines B1, B3, B4: causal BC-Transformer with PredVLA's GMM head, optionally chunked (Section 4.4)."""
+"""Baselines B1, B3, B4: causal BC-Transformer with PredVLA's GMM head, optionally chunked (Section 4.5)."""
 
 import torch
 from lerobot.policies.act.modeling_act import ACTTemporalEnsembler

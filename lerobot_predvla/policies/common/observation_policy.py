@@ -28,7 +28,7 @@ from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
 from lerobot_predvla.utils.threads import acting_threads
 
-BASELINE_TRAIN_STEPS = 50_000  # Section 4.4: baselines train for 50,000 steps (PredVLA: 30,000)
+BASELINE_TRAIN_STEPS = 50_000  # Section 4.5: baselines train for 50,000 steps (PredVLA: 30,000)
 
 
 def held_vision(vision: Tensor, interval: int) -> Tensor:
@@ -48,7 +48,7 @@ class ObservationPolicyConfig(CachedFeaturesConfig):
     `CachedFeaturesConfig` for the dimensions, front end, action head and optimiser fields.
 
     Defaults that differ from PredVLA's:
-        train_steps: Section 4.4: 50,000 for the baselines; pass it to lerobot-train's `--steps`
+        train_steps: Section 4.5: 50,000 for the baselines; pass it to lerobot-train's `--steps`
             (configs/policy/B*.json do).
         optimizer_lr: Adam learning rate, constant. The paper picks it from a four-point sweep per baseline
             (values not given): sweep it with `--policy.optimizer_lr`.

@@ -1,4 +1,4 @@
-"""Configuration of the ladder rungs L2-L5 and side branch L2b from PredVLA to BC-RNN (Section 4.5, Table 5).
+"""Configuration of the ladder rungs L2-L5 and side branch L2b from PredVLA to BC-RNN (Section 4.6, Table 5).
 
 L0 is PredVLA itself, L1 and the inference-time ablations are PredVLAConfig fields (`er_iterations=0`), and
 L6 is the BC-RNN baseline (`predvla_bc_rnn`); see configs/policy/.
@@ -11,7 +11,7 @@ from lerobot.configs import PreTrainedConfig
 from lerobot_predvla.policies.predvla.configuration_predvla import PREDVLA_PAPER_PARAMETERS, PredVLAConfig
 
 LADDER_RUNGS = ("L2", "L2b", "L3", "L4", "L5")
-LADDER_WIDTHS = {"L2": 256, "L2b": 256, "L3": 301, "L4": 301, "L5": 142}  # Section 4.5: d per rung
+LADDER_WIDTHS = {"L2": 256, "L2b": 256, "L3": 301, "L4": 301, "L5": 142}  # Section 4.6: d per rung
 LADDER_PAPER_PARAMETERS = {"L2": PREDVLA_PAPER_PARAMETERS, "L2b": 724_884, "L3": 674_560, "L4": 674_560, "L5": 676_928}
 PREDICTIVE_RUNGS = ("L2", "L2b")  # the network still predicts vision and proprioception
 
@@ -43,9 +43,9 @@ class PredVLALadderConfig(PredVLAConfig):
     no error regression); `lambda_v` and `lambda_q` apply to L2 and L2b only.
 
     Args:
-        rung: "L2", "L2b", "L3", "L4" or "L5".
-        width: Recurrent width d of V, A_top and A_bottom (T keeps `module_dims[0]` = 64). None: the paper's
-            width for the rung (256, 256, 301, 301, 142); `module_dims` is set from it.
+        rung: The rung, "L2" (default), "L2b", "L3", "L4" or "L5" (Section 4.6; Table 5).
+        width: Recurrent width d of V, A_top and A_bottom; T keeps `module_dims[0]` = 64. None (default): the
+            paper's width for the rung (Section 4.6: 256, 256, 301, 301, 142); `module_dims` is set from it.
     """
 
     rung: str = "L2"
@@ -59,7 +59,7 @@ class PredVLALadderConfig(PredVLAConfig):
             self.width = LADDER_WIDTHS[self.rung]
         self.module_dims = (self.module_dims[0], self.width, self.width, self.width)
         if self.rung in ("L4", "L5"):
-            self.tau = (1.0, 1.0, 1.0, 1.0)  # Section 4.5: no temporal hierarchy from L4 on
+            self.tau = (1.0, 1.0, 1.0, 1.0)  # Section 4.6: no temporal hierarchy from L4 on
 
     @property
     def predictive(self) -> bool:

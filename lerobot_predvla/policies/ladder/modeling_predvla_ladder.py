@@ -1,4 +1,4 @@
-"""Ladder rungs L2-L5 and side branch L2b (Section 4.5): PredVLA taken apart one mechanism at a time."""
+"""Ladder rungs L2-L5 and side branch L2b (Section 4.6): PredVLA taken apart one mechanism at a time."""
 
 from typing import NamedTuple
 

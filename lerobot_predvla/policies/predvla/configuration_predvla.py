@@ -26,138 +26,89 @@ PREDVLA_PAPER_PARAMETERS = 675_732  # Table 1, at the paper's LIBERO layout (2 c
 @PreTrainedConfig.register_subclass("predvla")
 @dataclass
 class PredVLAConfig(CachedFeaturesConfig):
-    """Configuration for PredVLA, a hierarchical predictive-coding RNN policy.
+    """Configuration for PredVLA, a hierarchical predictive-coding RNN policy (Section 3).
 
-    Defaults are the paper's short-horizon LIBERO settings (Tables 1 and 2). The long-horizon preset
-    (LIBERO-10) is `PredVLAConfig.long_horizon()`, i.e. `--policy.tau=[30,14,8,2]
-    --policy.sequence_length=500` on the command line.
-
-    Inputs are the cached front-end features, never raw images: `observation.vision_features` (two
-    cameras x 96 PCA components), `observation.language_features` (64 PCA components of the
-    all-MiniLM-L6-v2 instruction embedding) and `observation.state` (7 joints + 2 gripper). Built from a
-    dataset, `num_cameras`, `proprio_dim` and `action_dim` follow its features (any robot; see
-    `validate_cached_features`); the parameter count follows and is logged. The network
-    never receives them as inputs: vision and proprioception only enter the free energy minimised by
-    error regression; language enters the top module T (Eq. 4).
-
-    Fields shared with the other policy types (dimensions, front end, decoders, optimiser) are documented in
-    `CachedFeaturesConfig`; the paper's learning rate and step count are PredVLA's defaults there.
+    Defaults are the paper's short-horizon LIBERO settings (Tables 1 and 2); `PredVLAConfig.long_horizon()` is the
+    LIBERO-10 preset (`'--policy.tau=[30,14,8,2]' --policy.sequence_length=500` on the command line). Inputs are
+    the cached front-end features (`observation.vision_features`, `observation.language_features`,
+    `observation.state`), never raw images. Vision and proprioception enter only the free energy minimised by error
+    regression, language only the top module T (Eq. 4). The fields every policy type shares (dimensions, front end,
+    decoders, optimiser, training length) are documented in `CachedFeaturesConfig`. docs/paper.md maps each field
+    to the paper and gives our reading where the paper leaves a choice open.
 
     Args:
-        language_encoder_dim: Output size of the frozen sentence encoder (Table 1: 384).
-        vision_encoder_dim: Output size of the frozen ResNet18 per camera (Table 1: 512).
-        module_dims: Deterministic state sizes d_l of (T, V, A_top, A_bottom) (Table 1: 64/256/256/256).
-        latent_dim: Size r of each module's free variable c^l (Table 1: 64 per module).
-        bottleneck_dim: Width of the visual-to-action bottleneck W_VA (Eq. 5; Table 1: 256 -> 32 -> 256).
-        tau: Time constants of (T, V, A_top, A_bottom) (Table 1 short horizon: (16, 8, 5, 2);
-            long horizon: (30, 14, 8, 2)).
-        posterior_lr: Adam learning rate of the training posteriors c_q (Table 2: 1e-2). Each demonstration's
-            posteriors are stepped by their own Adam when the demonstration is in the batch, after LeRobot's
-            optimizer step (`PredVLAPolicy.update`; `posterior_store.py` says why this is the paper's per-episode
-            reading). They are not parameters of LeRobot's optimizer, so `--optimizer.*` flags and gradient
-            clipping (`grad_clip_norm`) apply to the network only.
-        grad_clip_norm: Clip of the network gradient's norm, applied by lerobot-train before Adam (Table 2:
-            "enabled", value not given; `CachedFeaturesConfig`'s 1.0 for the baselines). 100 for PredVLA, above
-            every gradient norm logged over the first 12,000 steps of Table 2's recipe on libero_object (8.6 to
-            74, median 41), so it only catches spikes. At 1.0 the clip bound at every step (scale 0.02-0.06), and
-            torch.optim.Adam's weight decay, added to the clipped gradient unscaled, then outweighed the loss
-            gradient 2-10x on the priors' maps of T, V and A_top (trained by the complexity term alone): their
-            norms fell from 4.6 to 0.2-0.6 in 10,000 steps (docs/research/table2.md; `predvla inspect` shows these
-            forces). The CPU recipes (`configs/policy/predvla_cpu*.json`) keep the 1.0 they were measured with.
-        posterior_moments_dtype: Storage of the training posteriors' Adam moments: "float32" (default) or
-            "bfloat16", a third less memory for large datasets (LIBERO-90, 4,500 demonstrations x 500 steps:
-            4.6 GB instead of 6.9 GB; docs/speed.md). The update is computed in float32 and the posteriors stay
-            float32; the moments are rounded to ~3 significant digits when stored.
-        posterior_adam: How the training posteriors' Adam steps. "row" (default): each demonstration's posteriors
-            are stepped only when it is in the batch, with its own step count (`posterior_store.py`). "dense": one
-            Adam over the whole store, as `torch.optim.Adam` on a single tensor would do: rows absent from the
-            batch see a zero gradient, so their moments decay while stale momentum keeps moving them. Section 3.4
-            makes the posteriors "model parameters" without saying which; dense costs one pass over the store
-            per step.
-        lr_decay_to: None (default): constant learning rates (Table 2). A value: the network learning rate decays
-            along a cosine from `optimizer_lr` to this value over the run (`--steps`, at most `train_steps`;
-            LeRobot's `cosine_decay_with_warmup`, no warm-up); `posterior_lr` stays constant. An option for
-            experiments (docs/research/libero_object_cpu.md measures a cool-down with it).
-        lambda_v: Weight of the visual prediction error (Eq. 10; Table 2: 1).
-        lambda_q: Weight of the proprioceptive prediction error (Eq. 10; Table 2: 1). Proprioception is raw radians,
-            so at 1 its error is tiny against the complexity term; the CPU recipe
-            `configs/policy/predvla_cpu_lambda_q100.json` trains with 100 (about one over the joint angles' variance)
-            and keeps `er_lambda_q` at 1 (docs/research/lambda_q100.md).
+        language_encoder_dim: Output size of the frozen sentence encoder, before PCA (Table 1: 384).
+        vision_encoder_dim: Output size of the frozen ResNet18 per camera, before PCA (Table 1: 512).
+        module_dims: State sizes d_l of the modules (T, V, A_top, A_bottom) (Table 1: (64, 256, 256, 256)).
+        latent_dim: Size r of each module's free variable c^l (Table 1: 64).
+        bottleneck_dim: Width of the visual-to-action bottleneck z^VA = W_VA d^V (Eq. 5; Table 1: 256 -> 32 -> 256).
+        tau: Time constants tau_l of (T, V, A_top, A_bottom), in control steps (Eqs. 3-4; Table 1: (16, 8, 5, 2)
+            short horizon, (30, 14, 8, 2) long horizon).
+        use_bottleneck: Keep the visual-to-action bottleneck V -> A_top (Eq. 5; default True). False is ablation A2
+            (Table 6).
+        use_efference_copy: Keep the efference copy of the previous action and proprioception predictions into V
+            (Eq. 6; default True). False is ablation A3 (Table 6).
+        recurrence_backend: Implementation of the recurrence's per-step loops, all with the same results; not a
+            paper setting. "auto" (default): loops compiled in C++ for CPU float32/float64 where a compiler is
+            present, else the Python loops; "cpp": the compiled loops or an error; "python": ATen ops on any device
+            and dtype (docs/speed.md).
+        grad_clip_norm: Norm at which lerobot-train clips the network's gradient before Adam (default 100). Table 2
+            enables clipping without a value; 100 catches spikes only, where a clip that binds at every step lets
+            weight decay erase the priors' maps (docs/paper.md, "Choices the paper leaves open").
+        posterior_lr: Adam learning rate of the training posteriors c_q (Section 3.4; Table 2: 1e-2, constant). They
+            have their own Adam (`posterior_store.py`), so `--optimizer.*` flags and `grad_clip_norm` leave them alone.
+        posterior_moments_dtype: Storage dtype of the training posteriors' Adam moments, not a paper setting:
+            "float32" (default) or "bfloat16", a third less memory for large datasets (docs/speed.md); the update
+            itself is computed in float32.
+        posterior_adam: How the training posteriors' Adam steps: "row" (default), each demonstration's own Adam,
+            stepped when it is in the batch; "dense", one Adam over the whole store. Section 3.4 makes the posteriors
+            "model parameters" without saying which (`posterior_store.py`).
+        lr_decay_to: None (default): constant learning rates, as in Table 2. A value: the network's learning rate
+            decays along a cosine from `optimizer_lr` to it over `train_steps`; `posterior_lr` stays constant.
+        lambda_v: Weight of the visual prediction error eps_v in training (Eq. 10; Table 2: 1).
+        lambda_q: Weight of the proprioceptive prediction error eps_q in training (Eq. 10; Table 2: 1).
         lambda_a: Weight of the action negative log-likelihood (Eq. 10; Table 2: 1).
-        complexity_weights: w_l of (T, V, A_top, A_bottom) in the training complexity term (Eq. 8;
-            Table 2: (0.05, 0.02, 0.02, 0.01)).
-        complexity_reduction: How the training loss reduces C_t over a sequence. "sum" (default): C is the
-            sum of C_t over the sequence's valid steps, as in the free energy of Eq. 9, since Eq. 10 puts the
-            mask-normalised bar on the errors and the NLL but not on C; averaged over the batch. "mean": the
-            mask-normalised mean, like the other terms (about T times weaker; it leaves the priors far from
-            the posteriors on short schedules, see the README).
-        open_loop_weight: beta >= 0, weight of an extra training term, not in the paper (0, the default, is
-            Eq. 10 alone): the accuracy and action terms of Eq. 10 (lambda_v eps_v + lambda_q eps_q +
-            lambda_a NLL) again on the exact open-loop rollout of the same episodes, every posterior at its
-            prior (Section 3.5; the rollout of `er_iterations=0`). Eq. 10 trains the states regenerated from
-            the posteriors, while acting starts every step from the priors; on short CPU schedules the task
-            then drifts into the training posteriors and the open-loop chain degrades
-            (docs/research/libero_object_cpu.md). This term trains the prior chain itself to follow the
-            demonstrations; the CPU recipe `configs/policy/predvla_cpu.json` uses it.
-        use_amp: LeRobot's own flag (`--policy.use_amp`, default False: float32, as measured against the paper's
-            recipe). True trains with bfloat16 mixed precision: the recurrence's loops and the heads run in bfloat16
-            under `lerobot-train`'s autocast, while the losses, the posteriors and both Adams' states stay float32.
-            On the CPU a step takes 0.6-0.9x the time, but over 2,000 steps of Table 2's recipe the training-loss
-            terms trail float32's by 1-9% (docs/speed.md, "Mixed precision"), so it is opt-in. Error regression and
-            the front end always run at full precision, also under `lerobot-eval`'s autocast.
-        er_window: Error-regression window W in control steps (Table 2: 40).
-        er_iterations: Adam iterations n_itr per control step (Table 2: 10). 0 is exact open loop.
-        er_deadline_ms: None (default): every control step runs all `er_iterations`. A value: error regression's
-            time budget per control step in milliseconds (e.g. 33 for a 30 Hz robot, minus the front end's share):
-            it runs as many of the `er_iterations` as fit, at least one, and logs how many it ran
-            (docs/robot.md measures what each budget sustains on 2 CPU cores and what it costs in success: 2 of 10
-            iterations succeeded less often than exact open loop).
-        er_lr: Adam step size eta of error regression (Table 2: 0.05). With Adam afresh at every control step
-            (`er_adam_state="fresh"`) its first iteration moves every posterior coordinate in the window by about
-            eta: on a checkpoint whose training posteriors sit closer to their priors than that, error regression
-            drives the action head where it was never trained (`predvla inspect` warns and compares step sizes with
-            `--er-variant er_lr=...`; docs/research/table2.md: on Table 2's own checkpoint 0.05 does; 0.002 halves
-            the action error on replayed demonstrations without more successes in the simulator on the episodes
-            evaluated).
-        er_adam_state: Whether error regression's Adam starts afresh at every control step ("fresh", the default)
-            or each window posterior continues the moments and step count of the control steps it was already
-            optimised in ("carried"; the newest starts from zero). Table 2 names Adam but not which; fresh kicks
-            every posterior of the window by about `er_lr` at each control step's first iteration, carried only
-            the newest (docs/paper.md, "Choices the paper leaves open").
-        er_optimizer: Error regression's update of the window's posteriors. "adam" (default, Table 2) or "gd": the
-            plain gradient step c_q <- c_q - eta dE/dc_q that Section 3.5 writes, with `er_lr` as eta (no moments;
-            `er_adam_state` is then unused).
-        er_detach_priors: False (default): dE/dc_q is the full derivative, including how each posterior moves the
-            later steps' priors c_p (Eqs. 1-2) through the regenerated states. True: the priors enter the
-            complexity term as constants (their values at the current iterate), so the complexity pulls each
-            posterior toward its prior and never drags the priors along. Section 3.5 does not say which.
-        er_complexity_weight: w_ER, the complexity weight of every module during error regression
-            (Table 2: 1.0).
-        er_lambda_v: Visual prediction-error weight during error regression (1; 0 is ablation A4).
-        er_lambda_q: Proprioceptive prediction-error weight during error regression (1; 0 is A5).
-        use_bottleneck: Keep the visual-to-action bottleneck V -> A_top (Eq. 5); False is ablation A2.
-        use_efference_copy: Keep the efference copy A -> V of the model's own previous action and
-            proprioception predictions (Eq. 6); False is ablation A3.
-        recurrence_backend: Implementation of the fused recurrence's per-step loops (forward and hand-written
-            BPTT; same results, `tests/test_recurrence_cpp.py`). "auto" (default): the loops compiled in C++
-            (`recurrence_cpp.py`) on CPU float32/float64 tensors where a C++ compiler and ninja are present, else the
-            Python loops, with one log line saying why. They are compiled once per Python and torch version by
-            `predvla build` (`make install` runs it), else by the first rollout (~30 s on 2 cores, logged), and loaded
-            in ~0.1 s afterwards. "cpp": the compiled loops or an error naming this flag. "python": ATen ops called
-            from Python, on any device and dtype, nothing to build (what configs saved before "auto" existed hold;
-            pass `--policy.recurrence_backend=auto` to such a checkpoint for the compiled loops). Error regression on
-            CPU is dispatch-bound at batch 1 and runs ~1.6x faster compiled (docs/speed.md).
-        er_corruption_channel: Observation channel corrupted before error regression (Section 4.4,
-            "Sensitivity to corrupted observations"): "vision" or "proprio"; None (default) corrupts nothing.
-            The other channel is left untouched.
-        er_corruption_alpha: Fraction alpha in [0, 1] of the window's observations of that channel replaced
-            (paper: 0.25, 0.5, 0.75, 1.0). Control step t is replaced iff floor((t+1) alpha) > floor(t alpha),
-            so every window of W steps holds exactly W alpha replaced steps when W alpha is an integer; for
-            vision the schedule counts visual refreshes, so the fraction applies to the fresh frames.
-        er_corruption_root: Root of a LeRobot dataset with the cached columns, source of the replacing
-            observations (an unrelated episode); required with `er_corruption_channel`.
-        er_corruption_episode: Episode of `er_corruption_root` whose observations replace the live ones: step t
-            of the live episode receives its step t (its last step once it has ended).
+        complexity_weights: Training complexity weights w_l of (T, V, A_top, A_bottom) (Eq. 8; Table 2:
+            (0.05, 0.02, 0.02, 0.01)).
+        complexity_reduction: How the training loss reduces C_t over a sequence: "sum" (default) over its valid
+            steps, as in the free energy of Eq. 9, since Eq. 10 puts the mask-normalised bar on the other terms but
+            not on C; "mean", mask-normalised like them, is the other reading.
+        open_loop_weight: Weight beta >= 0 of a training term not in the paper: Eq. 10's accuracy and action terms
+            again on the open-loop rollout, every posterior at its prior (the rollout of `er_iterations=0`). 0
+            (default) is Eq. 10 alone; it trains the prior chain that acting starts from.
+        use_amp: LeRobot's field (default False: float32). True trains the recurrence and the heads in bfloat16
+            under lerobot-train's autocast, the losses, posteriors and Adam states staying float32; error regression
+            and the front end always run in full precision (docs/speed.md, "Mixed precision").
+        er_window: Error-regression window W, in control steps (Section 3.5; Table 2: 40).
+        er_iterations: Optimisation steps n_itr on the window's posteriors per control step (Table 2: 10). 0 is
+            exact open-loop control (Section 3.5; ladder rung L1).
+        er_deadline_ms: Time budget of error regression per control step, in milliseconds, not a paper setting: it
+            runs as many of the `er_iterations` as fit, at least one, and logs how many. None (default) runs them
+            all (docs/robot.md).
+        er_lr: Step size eta of error regression's update (Section 3.5; Table 2: 0.05).
+        er_adam_state: Error regression's Adam starts afresh at every control step ("fresh", default: each step's
+            n_itr iterations are one optimisation, as Section 3.5 lists them), or each window posterior carries its
+            moments and step count over the control steps it is optimised in ("carried"). Table 2 does not say which.
+        er_optimizer: Error regression's update: "adam" (default; Table 2) or "gd", the plain step
+            c_q <- c_q - eta dE/dc_q that Section 3.5 writes, with `er_lr` as eta (`er_adam_state` then unused).
+        er_detach_priors: False (default): Section 3.5's dE/dc_q is the full derivative, including how each
+            posterior moves the later priors c_p (Eqs. 1-2) through the states. True: the priors enter the complexity
+            term as constants; the paper does not say which.
+        er_complexity_weight: Complexity weight w_ER of every module during error regression (Section 4.3; Table 2:
+            1.0).
+        er_lambda_v: Weight of the visual prediction error during error regression (Eq. 9; default 1, as
+            lambda_v). 0 is ablation A4 (Table 6).
+        er_lambda_q: Weight of the proprioceptive prediction error during error regression (Eq. 9; default 1, as
+            lambda_q). 0 is ablation A5 (Table 6).
+        er_corruption_channel: Observation channel corrupted before error regression, "vision" or "proprio"
+            (Section 4.4; Figure 5). None (default) corrupts nothing.
+        er_corruption_alpha: Fraction alpha in [0, 1] of the window's observations of that channel that are replaced
+            (Section 4.4: 0.25, 0.5, 0.75, 1; default 0). Control step t is replaced iff floor((t + 1) alpha) >
+            floor(t alpha); for vision the count runs over refreshed frames.
+        er_corruption_root: Root of a LeRobot dataset with the cached columns that supplies the replacing
+            observations ("an unrelated episode", Section 4.4); required with `er_corruption_channel` (default None).
+        er_corruption_episode: Episode of `er_corruption_root` whose step t replaces live step t, its last step once
+            it has ended (default 0).
     """
 
     # Front end (Table 1).

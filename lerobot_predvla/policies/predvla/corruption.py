@@ -1,4 +1,4 @@
-"""Observation corruption for error regression (Section 4.4, "Sensitivity to corrupted observations").
+"""Observation corruption for error regression (Section 4.4; Section 5.3, "Sensitivity to corrupted observations").
 
 For one channel at a time, a fraction alpha of the observations in the inference window is replaced by
 observations of an unrelated episode; the other channel is untouched. A deterministic schedule gives the

@@ -1,7 +1,8 @@
 """Building LIBERO tasks: suites, environments without or with cameras, randomised resets.
 
-Importing this module sets MUJOCO_GL=egl (unless set) before MuJoCo loads, so rendering works
-headless on CPU.
+Loading LIBERO (`_libero`, which every function here that needs it goes through) first sets MUJOCO_GL=egl unless it
+is set (`use_headless_gl`), so rendering works headless on CPU. Importing this module sets nothing: a process that
+never loads the simulator (and the commands it starts) keeps its environment as it was.
 """
 
 import os
@@ -13,13 +14,16 @@ import numpy as np
 from lerobot_predvla.columns import SIM_CAMERAS, SUITES
 from lerobot_predvla.sims.libero.config_path import active_config
 
-os.environ.setdefault("MUJOCO_GL", "egl")
-
 IMAGE_SIZE = 128
 # robosuite's default initialization noise (std, rad, per arm joint): the official init states of the benchmark
 # start the arm with it (their joint angles spread by 0.017-0.022 rad on libero_object), LIBERO's ControlEnv with none.
 OFFICIAL_INIT_NOISE = 0.02
 INSTALL_HINT = "LIBERO is not installed in this venv: run `make libero`"
+
+
+def use_headless_gl() -> None:
+    """MUJOCO_GL=egl unless it is set: call before MuJoCo's rendering loads (LIBERO, robosuite)."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def check_libero_config() -> None:
@@ -39,6 +43,7 @@ def check_libero_config() -> None:
 def _libero():
     """Import libero.libero, failing with the install hint (never prompting) if it is not set up."""
     check_libero_config()
+    use_headless_gl()
     try:
         import libero.libero as libero_pkg
         from libero.libero import benchmark

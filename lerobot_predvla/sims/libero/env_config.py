@@ -87,6 +87,9 @@ class PredVLALiberoEnv(LiberoEnv):
             sees them (fault-injection evaluation, docs/reliability.md); 0 (default) injects nothing.
         fault_mode: "nan" (the frame's values become NaN) or "drop" (the frame is missing).
         fault_seed: Seed of the fault draws.
+        oracle: Also observe the objects of interest's poses relative to the gripper
+            (`observation.environment_state`), which a policy trained with the oracle front end (`predvla convert
+            --oracle`, a diagnostic) reads instead of its cameras; False (default) for every other policy.
     """
 
     render_interval: int = 4
@@ -95,6 +98,7 @@ class PredVLALiberoEnv(LiberoEnv):
     fault_rate: float = 0.0
     fault_mode: str = "nan"
     fault_seed: int = 0
+    oracle: bool = False
 
     def __post_init__(self):
         super().__post_init__()
@@ -111,7 +115,7 @@ class PredVLALiberoEnv(LiberoEnv):
 
     @property
     def gym_kwargs(self) -> dict:
-        return {**super().gym_kwargs, "render_interval": self.render_interval}
+        return {**super().gym_kwargs, "render_interval": self.render_interval, "oracle": self.oracle}
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False):
         # The simulator (LIBERO, robosuite, MuJoCo), loaded once an env is built: registering the type loads none.

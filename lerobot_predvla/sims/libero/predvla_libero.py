@@ -24,17 +24,22 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from lerobot_predvla.sims.libero.env import check_libero_config
+from lerobot_predvla.frontend.oracle import POSE_DIM
+from lerobot_predvla.sims.libero.env import check_libero_config, use_headless_gl
+from lerobot_predvla.sims.libero.oracle import object_poses, objects_of_interest
 
 check_libero_config()  # before LIBERO reads its config: a stale one otherwise fails deep inside a reset
+use_headless_gl()  # before robosuite chooses its GL context
 
 from lerobot.envs.libero import LiberoEnv, _get_suite, _select_task_ids, parse_camera_names  # noqa: E402
 from lerobot.envs.utils import NEW_ROLLOUT_OPTION  # noqa: E402
+from libero.libero.envs.bddl_utils import robosuite_parse_problem  # noqa: E402
 from libero.libero.envs.env_wrapper import ControlEnv  # noqa: E402
 from robosuite import macros  # noqa: E402
 from robosuite.utils.binding_utils import GLContext  # noqa: E402  (robosuite's choice for MUJOCO_GL)
 
 IMAGE_FRESH = "image_fresh"  # becomes `observation.image_fresh` in LeRobot's preprocess_observation
+ENVIRONMENT_STATE = "environment_state"  # becomes `observation.environment_state` (the oracle's object poses)
 UNSTABLE = mujoco.mjtWarning.mjWARN_BADQACC  # MuJoCo's "NaN, Inf or huge value in QACC": it resets the state
 # What `mujoco.MjrContext` uploads from a model (textures, meshes, height fields, skins, flexes) besides the
 # visual settings: two models equal in these render alike through one context.
@@ -177,11 +182,19 @@ class SparseRenderLiberoEnv(LiberoEnv):
     control step with the same robosuite calls as `regenerate_obs_from_state`, which is how
     `predvla demos` (and LIBERO's own datasets) rendered the training data, so a fresh image equals the
     demonstrations' render of the same state.
+
+    With `oracle`, every observation also carries the objects of interest's poses relative to the gripper
+    (`environment_state`, `libero.oracle.object_poses`): the inputs of the oracle front end, a diagnostic.
     """
 
-    def __init__(self, *args, render_interval: int = 4, **kwargs):
+    def __init__(self, *args, render_interval: int = 4, oracle: bool = False, **kwargs):
         super().__init__(*args, **kwargs)
         self.render_interval = render_interval
+        self.oracle_objects = objects_of_interest(robosuite_parse_problem(self._task_bddl_file)) if oracle else []
+        if oracle:
+            self.observation_space.spaces[ENVIRONMENT_STATE] = spaces.Box(
+                -np.inf, np.inf, shape=(POSE_DIM * len(self.oracle_objects),), dtype=np.float32
+            )
         self._steps_since_reset = 0
         self._images: dict[str, np.ndarray] | None = None
         self._render_key: str | None = None  # render_assets_key of the current model (robosuite rebuilds it)
@@ -231,6 +244,8 @@ class SparseRenderLiberoEnv(LiberoEnv):
         raw_obs.update(self._images)
         observation = super()._format_raw_obs(raw_obs)
         observation[IMAGE_FRESH] = np.array([fresh], dtype=np.uint8)
+        if self.oracle_objects:
+            observation[ENVIRONMENT_STATE] = object_poses(raw_obs, self.oracle_objects)
         return observation
 
     def render(self) -> np.ndarray:
