@@ -1,10 +1,14 @@
-"""Tiny hdf5 files in the exact original LIBERO layout (see FACTS.md), for the front-end tests."""
+"""Tiny hdf5 files in the exact original LIBERO layout, and the front-end commands to run on them (tests)."""
 
+import argparse
 import json
 from pathlib import Path
 
 import h5py
 import numpy as np
+
+from lerobot_predvla.cli import convert as convert_cmd
+from lerobot_predvla.cli import fit_frontend as fit_frontend_cmd
 
 IMAGE_SIZE = 128
 RAW_TOP_ROWS = 4  # Raw (upside-down) images carry a pure red band in their first rows.
@@ -66,3 +70,13 @@ def write_libero_file(
             demo.attrs["model_file"] = "<mujoco/>"
             written[f"demo_{i}"] = arrays
     return written
+
+
+def run_cli(argv: list[str]) -> int:
+    """`predvla fit-frontend ...` or `predvla convert ...` in this process; the command's exit code."""
+    parser = argparse.ArgumentParser()
+    subparsers = parser.add_subparsers()
+    fit_frontend_cmd.add_parser(subparsers)
+    convert_cmd.add_parser(subparsers)
+    args = parser.parse_args(argv)
+    return args.func(args)

@@ -1,6 +1,5 @@
 """`predvla convert`: LIBERO hdf5 -> LeRobot v3.0 dataset with cached features, and its rejections."""
 
-import argparse
 import json
 from pathlib import Path
 
@@ -11,10 +10,8 @@ import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.envs.utils import preprocess_observation
 from lerobot.processor.env_processor import LiberoProcessorStep
-from libero_factory import RAW_TOP_ROWS, write_libero_file
+from libero_factory import RAW_TOP_ROWS, run_cli, write_libero_file
 
-from lerobot_predvla.cli import convert as convert_cmd
-from lerobot_predvla.cli import fit_frontend as fit_frontend_cmd
 from lerobot_predvla.columns import HDF5_CAMERAS, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.data import conversion
 from lerobot_predvla.data.libero_hdf5 import LiberoDataError, scan_file
@@ -30,14 +27,6 @@ FILES = [("a_soup_demo.hdf5", SOUP, [6, 5], 1), ("b_soup_again_demo.hdf5", SOUP,
 EPISODES = [(file, f"demo_{i}", n, text) for file, text, lengths, _ in FILES for i, n in enumerate(lengths)]
 CAMERA_HDF5 = {"observation.images.image": "obs/agentview_rgb", "observation.images.image2": "obs/eye_in_hand_rgb"}
 
-
-def run_cli(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser()
-    subparsers = parser.add_subparsers()
-    fit_frontend_cmd.add_parser(subparsers)
-    convert_cmd.add_parser(subparsers)
-    args = parser.parse_args(argv)
-    return args.func(args)
 
 
 @pytest.fixture(scope="module")

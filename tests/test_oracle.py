@@ -4,7 +4,6 @@ The unit tests need no simulator; the others run LIBERO for real (libero_object 
 scripted-expert episode, physics only).
 """
 
-import argparse
 import json
 
 import h5py
@@ -15,11 +14,9 @@ from lerobot.configs.types import PipelineFeatureType
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.lerobot_types import TransitionKey
 from lerobot.utils.constants import OBS_ENV_STATE
-from libero_factory import write_libero_file
+from libero_factory import run_cli, write_libero_file
 from scipy.spatial.transform import Rotation
 
-from lerobot_predvla.cli import convert as convert_cmd
-from lerobot_predvla.cli import fit_frontend as fit_frontend_cmd
 from lerobot_predvla.columns import FRONTEND_META_DIR, OBS_VISION_FEATURES
 from lerobot_predvla.frontend import FrontendArtefact, FrontendArtefactError
 from lerobot_predvla.frontend.oracle import POSE_DIM, OracleStandardisation
@@ -29,14 +26,6 @@ SUITE = "libero_object"
 SOUP = "pick up the alphabet soup and place it in the basket"
 OBJECTS = {SOUP: ["alphabet_soup_1", "basket_1"]}
 
-
-def run_cli(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser()
-    subparsers = parser.add_subparsers()
-    fit_frontend_cmd.add_parser(subparsers)
-    convert_cmd.add_parser(subparsers)
-    args = parser.parse_args(argv)
-    return args.func(args)
 
 
 @pytest.fixture(scope="module")
