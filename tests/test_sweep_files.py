@@ -1,0 +1,146 @@
+"""The committed sweep files: valid, reading every policy file, and the protocols they state (corruption points,
+randomised resets, the reading screen, the init-noise demonstrations)."""
+
+import json
+from pathlib import Path
+
+import pytest
+from sweep_factory import FakeLeRobot, arg, sweep_file
+
+from lerobot_predvla.experiments.sweep import (
+    Run,
+    Runner,
+    Sweep,
+    SweepError,
+)
+
+
+def test_the_paper_sweep_file_is_valid():
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")
+    assert sweep.settings.n_episodes == 50 and sweep.settings.episode_length == 600 and len(sweep.settings.seeds) == 14
+    assert sweep.configs["A6"].checkpoint_from == "predvla" and sweep.configs["L2b"].branch
+    assert len(sweep.runs(["predvla"])) == 56 and len(sweep.runs(["A1"])) == 21
+
+
+def test_the_libero_demo_sweep_file_is_valid():
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "libero_demo.yaml")
+    assert sweep.settings.train_device == "cpu" and sweep.settings.eval_args == ["--env.task_ids=[0]"]
+    assert len(sweep.runs()) == 6 and sweep.configs["A4"].compare_to == "predvla"
+    assert sweep.settings.datasets["libero_object"]["root"].endswith("outputs/libero_demo/dataset")
+
+
+def test_randomised_resets_evaluate_from_their_own_seed_and_are_recorded(tmp_path):
+    configs = [{"name": "predvla", "group": "main"},
+               {"name": "fresh", "group": "ablation", "checkpoint_from": "predvla", "init_states": False,
+                "eval_seed": 1000}]
+    fake = FakeLeRobot()
+    runner = Runner(Sweep.load(sweep_file(tmp_path, configs=configs, seeds=[0], suites=["libero_object"])),
+                    tmp_path / "runs", execute=fake)
+    assert not runner.run(progress=False)["failed"]
+    evals = {arg(c, "output_dir").split("/eval/")[1].split("/")[0]: c for c in fake.commands
+             if c[0].endswith("lerobot-eval")}
+    assert arg(evals["predvla"], "env.init_states") == "true" and arg(evals["predvla"], "seed") == "0"
+    assert arg(evals["fresh"], "env.init_states") == "false" and arg(evals["fresh"], "seed") == "1000"
+    assert fake.count("lerobot-train") == 1  # the resets reuse the trained checkpoint
+    record = json.loads((tmp_path / "runs/records/fresh/libero_object/seed0.json").read_text())
+    assert record["init_states"] is False and record["eval_seed"] == 1000
+    base = json.loads((tmp_path / "runs/records/predvla/libero_object/seed0.json").read_text())
+    assert base["init_states"] is True and base["eval_seed"] == 0
+
+
+def test_the_libero_object_cpu_sweep_file_is_valid(tmp_path):
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "libero_object_cpu.yaml")
+    assert sweep.settings.eval_tasks == list(range(10))
+    assert sweep.settings.data["libero_object"].language_from == "libero"
+    runner = Runner(sweep, tmp_path)
+    train = runner.train_command(sweep.configs["predvla_cpu"], "libero_object", 0)
+    assert "--policy.open_loop_weight=1.0" in train and "--policy.optimizer_lr=0.001" in train
+    assert "--steps=4000" in train and not any(a.startswith("--policy.complexity_weights") for a in train)
+    # The shipped checkpoints/predvla_libero_object: the recipe trained 8,000 steps.
+    shipped = runner.train_command(sweep.configs["predvla_cpu_8k"], "libero_object", 0)
+    assert "--steps=8000" in shipped and "--policy.open_loop_weight=1.0" in shipped
+    assert sweep.configs["predvla_cpu_8k_open_loop"].checkpoint_from == "predvla_cpu_8k"
+    ablation = runner.train_command(sweep.configs["predvla_cpu_no_open_loop_term"], "libero_object", 0)
+    assert "--policy.open_loop_weight=0.0" in ablation
+    assert "--policy.type=predvla_bc_rnn" in runner.train_command(sweep.configs["B2"], "libero_object", 0)
+    fresh = sweep.configs["predvla_cpu_8k_random_resets"]
+    assert fresh.checkpoint_from == "predvla_cpu_8k" and not fresh.init_states and fresh.eval_seed == 1000
+
+
+def test_the_reading_screen_changes_one_reading_per_configuration(tmp_path):
+    """configs/sweeps/libero_object_reading.yaml (docs/research/dynamics.md): each training reading reaches
+    lerobot-train as the config field it names, a dict-typed field whole as JSON (draccus parses no other form)."""
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "libero_object_reading.yaml")
+    runner = Runner(sweep, tmp_path)
+    train = {name: runner.train_command(sweep.configs[name], "libero_object", 0)
+             for name in ("table2", "mean", "scaled", "dense", "open_loop_term")}
+    assert all("--steps=10000" in c and "--batch_size=32" in c for c in train.values())
+    assert "--policy.complexity_reduction=mean" in train["mean"]
+    assert "--policy.posterior_adam=dense" in train["dense"]
+    assert "--policy.open_loop_weight=1.0" in train["open_loop_term"]
+    mapping = [a for a in train["scaled"] if a.startswith("--policy.normalization_mapping=")]
+    assert len(mapping) == 1 and json.loads(mapping[0].split("=", 1)[1])["STATE"] == "MEAN_STD"
+    readings = {"--policy.type=predvla", "--policy.push_to_hub=false", "--policy.device=cpu"}
+    assert {a for a in train["table2"] if a.startswith("--policy.")} == readings  # the defaults: Table 2
+    assert sweep.configs["scaled_gd"].eval_overrides == {"er_optimizer": "gd"}
+    assert sweep.settings.eval_tasks == [1, 4, 7] and sweep.settings.n_episodes == 10
+
+
+def test_the_init_noise_sweep_records_demonstrations_that_start_like_the_official_init_states(tmp_path):
+    """The arm's initial joint noise, the half-turn rule and the holds after success reach `predvla demos`;
+    libero_object_cpu.yaml keeps the fixed start."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    for name, noise, half_turn, hold in (("libero_object_cpu_init_noise.yaml", "0.02", "nearest", "0"),
+                                         ("libero_object_cpu_init_noise_wrist.yaml", "0.02", "wrist_centre", "0"),
+                                         ("libero_object_cpu_hold.yaml", "0.02", "wrist_centre", "40"),
+                                         ("libero_object_cpu.yaml", "0.0", "nearest", "0")):
+        sweep = Sweep.load(sweeps / name)
+        spec = sweep.settings.data["libero_object"]  # outputs in tmp_path: nothing made on this machine counts
+        spec.hdf5, spec.frontend = str(tmp_path / name / "hdf5"), str(tmp_path / name / "frontend")
+        sweep.settings.datasets["libero_object"]["root"] = str(tmp_path / name / "dataset")
+        stage, command = Runner(sweep, tmp_path).data_commands("libero_object")[0]
+        assert stage == "demos" and command[command.index("--init-noise") + 1] == noise
+        assert command[command.index("--half-turn") + 1] == half_turn
+        assert command[command.index("--hold-steps") + 1] == hold
+
+
+def test_paper_sweep_reads_every_policy_file():
+    """configs/policy/*.json are `lerobot-train --config_path` files; the sweep takes their nested policy."""
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")
+    base = Path(__file__).parents[1] / "configs" / "sweeps"
+    types = {name: spec.policy_args(base, "libero_object")[0] for name, spec in sweep.configs.items()}
+    assert types["B1"] == "--policy.type=predvla_bc_transformer" and types["B2"] == "--policy.type=predvla_bc_rnn"
+    assert types["L3"] == "--policy.type=predvla_ladder"
+    assert "--policy.chunk_size=8" in sweep.configs["B3"].policy_args(base, "libero_object")
+
+
+def test_corruption_points_evaluate_with_an_unrelated_episode_of_another_suite(tmp_path):
+    corruption = {"name": "Cp25", "group": "corruption", "checkpoint_from": "predvla", "compare_to": "predvla",
+                  "corruption": {"channel": "proprio", "alpha": 0.25, "open_loop": "A6", "episode": 3},
+                  "suites": ["libero_object"]}
+    path = sweep_file(tmp_path, configs=[{"name": "predvla"}, corruption])
+    runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FakeLeRobot())
+    command = runner.eval_command(Run("Cp25", "libero_object", 0), tmp_path / "ckpt")
+    assert arg(command, "policy.er_corruption_channel") == "proprio"
+    assert arg(command, "policy.er_corruption_alpha") == "0.25"
+    assert arg(command, "policy.er_corruption_episode") == "3"
+    # libero_object is corrupted from libero_spatial's dataset, libero_spatial from libero_goal's (missing here).
+    assert arg(command, "policy.er_corruption_root") == str((tmp_path / "data" / "libero_spatial").resolve())
+    assert arg(runner.eval_command(Run("predvla", "libero_object", 0), tmp_path / "ckpt"),
+               "policy.er_corruption_channel") is None
+    with pytest.raises(SweepError, match="corruption source suites \\['libero_goal'\\]"):
+        Sweep.load(sweep_file(tmp_path, configs=[{"name": "predvla"}, {**corruption, "suites": ["libero_spatial"]}]))
+    with pytest.raises(SweepError, match="channel"):
+        Sweep.load(sweep_file(tmp_path, configs=[{"name": "predvla"}, {**corruption, "corruption": {"alpha": 1}}]))
+    hub_only = {s: {"repo_id": f"local/{s}"} for s in ("libero_object", "libero_spatial")}
+    with pytest.raises(SweepError, match=r"corruption source datasets of \['libero_spatial'\] need a local `root`"):
+        Sweep.load(sweep_file(tmp_path, datasets=hub_only, configs=[{"name": "predvla"}, corruption]))
+    runner.run(progress=False)
+    record = json.loads(runner.record_path(Run("Cp25", "libero_object", 0)).read_text())
+    assert record["group"] == "corruption" and record["corruption"]["alpha"] == 0.25
+
+
+def test_the_paper_sweep_has_every_corruption_point():
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")
+    points = {(s.corruption["channel"], s.corruption["alpha"]) for s in sweep.configs.values() if s.corruption}
+    assert points == {(c, a) for c in ("vision", "proprio") for a in (0.25, 0.5, 0.75, 1.0)}
