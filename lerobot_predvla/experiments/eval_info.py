@@ -3,7 +3,7 @@
 import json
 from pathlib import Path
 
-from lerobot_predvla.experiments.statistics import task_rates
+from lerobot_predvla.utils.statistics import task_rates
 
 EVAL_INFO_FILE = "eval_info.json"
 

@@ -1,7 +1,7 @@
 """Markdown tables and the number formats of every generated table: the experiment reports (`predvla report`) and
 the headline of README.md and docs/results.md (`predvla report --docs`)."""
 
-from lerobot_predvla.experiments.statistics import percent
+from lerobot_predvla.utils.statistics import percent
 
 MISSING = "—"  # a missing result
 

@@ -20,7 +20,7 @@ get one row over the union of their seeds, and their paired episodes one sign te
 
 Modules by job: `results` (loading records, plans, episodes and `report.json`), `summary` (the statistics across
 seeds), `paired` (paired episodes), `tables`, `figures`, `sections` (stages, fresh clone, starts, mechanism,
-learning rates) and `writer` (`write_report`); success arithmetic is `lerobot_predvla.experiments.statistics`'s,
+learning rates) and `writer` (`write_report`); success arithmetic is `lerobot_predvla.utils.statistics`'s,
 Markdown tables and number formats `lerobot_predvla.experiments.formatting`'s.
 """
 
@@ -30,7 +30,7 @@ from lerobot_predvla.experiments.report.paired import paired_task_rates, same_st
 from lerobot_predvla.experiments.report.results import SUMMARY_FILE, ReportError, load_summary, run_episodes
 from lerobot_predvla.experiments.report.sections import fresh_clone_section, stages_section
 from lerobot_predvla.experiments.report.writer import REPORT_FILE, write_report
-from lerobot_predvla.experiments.statistics import sign_test
+from lerobot_predvla.utils.statistics import sign_test
 
 __all__ = [
     "FIGURES",

@@ -9,7 +9,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from lerobot_predvla.experiments.report.results import run_episodes
-from lerobot_predvla.experiments.statistics import percent, sign_test
+from lerobot_predvla.utils.statistics import percent, sign_test
 
 PAIRING_KEYS = ("eval_seed", "init_states", "episode_length")
 

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
-from lerobot_predvla.experiments.statistics import success_rate, task_rates
 from lerobot_predvla.experiments.sweep.layout import PLAN_FILE, RECORDS_DIR, eval_run_dir
 from lerobot_predvla.sims.libero.protocol import SHORT_SUITES
+from lerobot_predvla.utils.statistics import success_rate, task_rates
 
 SUMMARY_FILE = "report.json"
 

@@ -18,10 +18,10 @@ from lerobot_predvla.experiments.lr_selection import (
     pending_selections,
 )
 from lerobot_predvla.experiments.report.results import load_json
-from lerobot_predvla.experiments.statistics import episode_totals
 from lerobot_predvla.experiments.sweep.layout import DATA_DIR, TRAIN_DIR, TRAIN_DONE_FILE, run_log_path
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
 from lerobot_predvla.sims.libero.protocol import SUITE_LABELS
+from lerobot_predvla.utils.statistics import episode_totals
 
 NOT_RUN = "not run yet"  # a learning-rate candidate of a sweep still running
 # beside the report: `python -m lerobot_predvla.sims.libero.start_spread --demos`

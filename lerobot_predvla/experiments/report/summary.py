@@ -7,8 +7,8 @@ import numpy as np
 
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.experiments.report.results import ReportError, Results
-from lerobot_predvla.experiments.statistics import mean_std
 from lerobot_predvla.sims.libero.protocol import SHORT_SUITES
+from lerobot_predvla.utils.statistics import mean_std
 
 
 def seed_cell(seeds: dict[int, float], planned: list[int]) -> dict:

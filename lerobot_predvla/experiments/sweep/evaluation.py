@@ -13,12 +13,12 @@ from pathlib import Path
 
 from lerobot_predvla import lerobot_commands
 from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
-from lerobot_predvla.experiments.statistics import episode_totals, percent
 from lerobot_predvla.experiments.sweep.layout import EVAL_WALL_FILE
 from lerobot_predvla.experiments.sweep.spec import ConfigSpec, Run, SweepError
 from lerobot_predvla.experiments.sweep.workspace import Workspace
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.manifest import sha256_file
+from lerobot_predvla.utils.statistics import episode_totals, percent
 from lerobot_predvla.utils.versions import machine, package_versions
 
 

@@ -31,6 +31,7 @@ from lerobot_predvla.sims.libero.env import make_env, official_init_states, task
 from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH, SUITE_LABELS
 from lerobot_predvla.sims.libero.rollout import IDLE, SETTLE_STEPS, run_episode
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
+from lerobot_predvla.utils.statistics import episode_totals, percent
 
 PLANS = ("state0", "nearest_mean")
 NEAREST_MEAN_KEY = "nearest_mean_plan"  # report.json: the second plan's numbers, beside the state-0 plan's
@@ -193,12 +194,12 @@ def collect(out: Path) -> dict[str, dict[str, dict]]:
 
 
 def totals(tasks: dict[str, dict], key: str | None = None) -> tuple[int, int]:
-    rows = [t if key is None else t[key] for t in tasks.values()]
-    return sum(r["successes"] for r in rows), sum(r["episodes"] for r in rows)
+    """(successes, episodes) of a suite's tasks: the state-0 plan's, or with `key` (`NEAREST_MEAN_KEY`) the other's."""
+    return episode_totals(t if key is None else t[key] for t in tasks.values())
 
 
 def _pct(successes: int, episodes: int) -> str:
-    return f"{100 * successes / episodes:.1f}%" if episodes else "—"
+    return f"{percent(successes, episodes):.1f}%" if episodes else "—"
 
 
 def _states_text(states: list[int]) -> str:
