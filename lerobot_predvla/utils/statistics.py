@@ -1,6 +1,6 @@
-"""Success arithmetic, in one place for the run records, reports, headline, blind replay and demos: success rates in % from
-success and episode counts, their totals over tasks, the mean and sample standard deviation over training seeds, and
-the exact sign test on paired episodes."""
+"""Success arithmetic, in one place for the run records, reports, headline, blind replay and demos: success rates in %
+from success and episode counts, their totals over tasks, the mean and sample standard deviation over training seeds,
+and the exact sign test on paired episodes."""
 
 from collections.abc import Iterable
 
