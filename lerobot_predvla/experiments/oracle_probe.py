@@ -23,7 +23,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.constants import OBS_STATE
 from sklearn.linear_model import RidgeCV
 from sklearn.model_selection import GroupKFold, cross_val_predict
-from sklearn.preprocessing import PolynomialFeatures
+from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 
 from lerobot_predvla.columns import OBS_VISION_FEATURES
 from lerobot_predvla.data.libero_hdf5 import scan_suites
@@ -78,23 +78,21 @@ def probe_data(hdf5_root: Path, suite: str, dataset_root: Path) -> tuple[np.ndar
         visions.append(vision[fresh])
         targets.append(poses[(ref.file, ref.demo)][fresh])
         groups.append(np.full(fresh.sum(), index))
-    target = np.concatenate(targets)
-    target = (target - target.mean(0)) / np.where(target.std(0) > 0, target.std(0), 1.0)
+    target = StandardScaler().fit_transform(np.concatenate(targets))
     return (np.concatenate(states), np.concatenate(steps).astype(np.float64), np.concatenate(visions), target,
             np.concatenate(groups), objects)
 
 
 def _held_out_sse(x: np.ndarray, y: np.ndarray, groups: np.ndarray) -> np.ndarray:
     """Per target dimension, the sum of squared errors of ridge predictions on held-out demonstrations."""
-    x = (x - x.mean(0)) / np.where(x.std(0) > 0, x.std(0), 1.0)
+    x = StandardScaler().fit_transform(x)
     predicted = cross_val_predict(RidgeCV(alphas=ALPHAS), x, y, groups=groups, cv=GroupKFold(FOLDS))
     return ((y - predicted) ** 2).sum(0)
 
 
 def run_probe(hdf5_root: Path, suite: str, dataset_root: Path) -> ProbeResult:
     state, step, vision, target, groups, objects = probe_data(hdf5_root, suite, dataset_root)
-    standardised = np.column_stack([state, step])
-    standardised = (standardised - standardised.mean(0)) / np.where(standardised.std(0) > 0, standardised.std(0), 1.0)
+    standardised = StandardScaler().fit_transform(np.column_stack([state, step]))
     expansion = PolynomialFeatures(degree=2, include_bias=False).fit_transform(standardised)
     sse = {
         "proprio": _held_out_sse(state, target, groups),

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from lerobot_predvla.data.libero_hdf5 import DemoRef, read_sim_states
 from lerobot_predvla.frontend.oracle import POSE_DIM, OracleStandardisation
-from lerobot_predvla.sims.libero.env import make_env, num_tasks, task_spec
+from lerobot_predvla.sims.libero.env import TaskSpec, make_env, num_tasks, task_spec
 
 EEF = "robot0_eef"  # LIBERO's sensors name poses in the Panda's end-effector frame `<object>_to_robot0_eef_*`
 
@@ -43,13 +43,16 @@ def object_poses(observation: dict, objects: list[str]) -> np.ndarray:
     return poses
 
 
-def task_of_file(suite: str, path: Path) -> int:
-    """The task id of a suite whose demonstration file `path` is (`<task name>_demo.hdf5`)."""
-    name = Path(path).name.removesuffix("_demo.hdf5")
-    for task_id in range(num_tasks(suite)):
-        if task_spec(suite, task_id).name == name:
-            return task_id
-    raise ValueError(f"{path}: no task of {suite} is named {name!r}, so its scene cannot be rebuilt.")
+def file_tasks(suite: str, files: list[Path]) -> dict[Path, TaskSpec]:
+    """The task of each demonstration file of a suite (`<task name>_demo.hdf5`), from one reading of its tasks."""
+    by_name = {spec.name: spec for spec in (task_spec(suite, task_id) for task_id in range(num_tasks(suite)))}
+    tasks = {}
+    for path in files:
+        name = Path(path).name.removesuffix("_demo.hdf5")
+        if name not in by_name:
+            raise ValueError(f"{path}: no task of {suite} is named {name!r}, so its scene cannot be rebuilt.")
+        tasks[path] = by_name[name]
+    return tasks
 
 
 def demo_object_poses(env, ref: DemoRef, objects: list[str]) -> np.ndarray:
@@ -68,9 +71,10 @@ def suite_object_poses(suite: str, refs: list[DemoRef]) -> tuple[dict[tuple[Path
     by_file: dict[Path, list[DemoRef]] = {}
     for ref in refs:
         by_file.setdefault(ref.file, []).append(ref)
+    tasks = file_tasks(suite, list(by_file))
     with tqdm(total=sum(ref.num_frames for ref in refs), desc="oracle poses", unit="frame") as progress:
         for path, file_refs in by_file.items():
-            env = make_env(task_spec(suite, task_of_file(suite, path)))
+            env = make_env(tasks[path])
             env.reset()
             objects[file_refs[0].instruction] = objects_of_interest(env.env.parsed_problem)
             for ref in file_refs:
