@@ -86,6 +86,37 @@ def test_the_reading_screen_changes_one_reading_per_configuration(tmp_path):
     assert sweep.settings.eval_tasks == [1, 4, 7] and sweep.settings.n_episodes == 10
 
 
+def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_same_episodes(tmp_path):
+    """libero_object_reading_confirm.yaml re-evaluates the screen's own configurations (its training folder is the
+    screen's); libero_object_reading_oracle.yaml trains the same readings on the oracle's features, converted by the
+    data stage with --oracle, and evaluates them with the env's oracle on the confirmation's episodes."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    screen = Sweep.load(sweeps / "libero_object_reading.yaml")
+    confirm = Sweep.load(sweeps / "libero_object_reading_confirm.yaml")
+    oracle = Sweep.load(sweeps / "libero_object_reading_oracle.yaml")
+    assert confirm.configs == screen.configs
+    for sweep in (confirm, oracle):
+        assert sweep.settings.eval_tasks == [1, 3, 4, 7] and sweep.settings.n_episodes == 50
+        assert sweep.settings.steps == screen.settings.steps and sweep.settings.seeds == screen.settings.seeds
+    screen_runner, oracle_runner = Runner(screen, tmp_path / "screen"), Runner(oracle, tmp_path / "oracle")
+    for name, spec in screen.configs.items():
+        twin = oracle.configs[f"oracle_{name}"]
+        assert twin.eval_overrides == spec.eval_overrides and twin.checkpoint_from == (
+            spec.checkpoint_from and f"oracle_{spec.checkpoint_from}")
+        if spec.checkpoint_from is None:  # the same training command but for the dataset
+            ours = oracle_runner.train_command(twin, "libero_object", 0)
+            theirs = screen_runner.train_command(spec, "libero_object", 0)
+            differ = {a.split("=")[0] for a in set(ours) ^ set(theirs)}
+            assert differ <= {"--dataset.repo_id", "--dataset.root", "--output_dir", "--job_name"}, differ
+    evaluation = oracle_runner.eval_command(Run("oracle_mean_gd", "libero_object", 0), tmp_path / "ckpt")
+    assert "--env.oracle=true" in evaluation and "--policy.er_optimizer=gd" in evaluation
+    spec = oracle.settings.data["libero_object"]
+    spec.hdf5, spec.frontend = str(tmp_path / "hdf5"), str(tmp_path / "frontend")
+    oracle.settings.datasets["libero_object"]["root"] = str(tmp_path / "dataset")
+    stages = dict(Runner(oracle, tmp_path).data_commands("libero_object"))
+    assert "--oracle" in stages["convert"] and "--oracle" not in stages["frontend"]
+
+
 def test_the_init_noise_sweep_records_demonstrations_that_start_like_the_official_init_states(tmp_path):
     """The arm's initial joint noise, the half-turn rule and the holds after success reach `predvla demos`;
     libero_object_cpu.yaml keeps the fixed start."""

@@ -123,6 +123,7 @@ class DataStages(Workspace):
                     str(dataset),
                     "--repo-id",
                     self.sweep.settings.datasets[suite]["repo_id"],
+                    *(["--oracle"] if spec.oracle else []),
                 ],
             )
         )

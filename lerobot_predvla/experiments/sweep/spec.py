@@ -184,6 +184,8 @@ class DataSpec:
         workers: `predvla demos` processes run at once (one per CPU core), each on every `workers`-th missing task
             (logs `seed0.demos.tasks<k>.log`). The demonstrations are the same for any value: an episode's seed
             depends only on `demo_seed`, its task and its attempt.
+        oracle: Convert with the oracle front end (`predvla convert --oracle`, a diagnostic: the simulator's object
+            poses relative to the gripper instead of the cameras' features; docs/frontend.md). False by default.
     """
 
     hdf5: str
@@ -199,6 +201,7 @@ class DataSpec:
     language_from: str = "libero"
     frame_stride: int = 4
     workers: int = 1
+    oracle: bool = False
 
 
 @dataclass(frozen=True)
