@@ -33,7 +33,7 @@ def sweep_file(tmp_path: Path, **changes) -> Path:
 def cli_flags(**given) -> argparse.Namespace:
     """`predvla sweep`'s protocol flags as parsed: None (not given) except `given`."""
     names = ("seeds", "suites", "steps", "n_episodes", "episode_length", "device", "accelerate_processes",
-             "eval_workers")
+             "eval_workers", "eval_tasks")
     return argparse.Namespace(**{**dict.fromkeys(names), **given})
 
 

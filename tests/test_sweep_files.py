@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 from sweep_factory import FakeLeRobot, arg, sweep_file
 
+from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.experiments.sweep import (
     Run,
     Runner,
@@ -86,18 +87,23 @@ def test_the_reading_screen_changes_one_reading_per_configuration(tmp_path):
     assert sweep.settings.eval_tasks == [1, 4, 7] and sweep.settings.n_episodes == 10
 
 
-def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_same_episodes(tmp_path):
-    """libero_object_reading_confirm.yaml re-evaluates the screen's own configurations (its training folder is the
-    screen's); libero_object_reading_oracle.yaml trains the same readings on the oracle's features, converted by the
-    data stage with --oracle, and evaluates them with the env's oracle on the confirmation's episodes."""
+def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_same_episodes(tmp_path, capsys):
+    """The confirmation is the screen's own sweep file with `--n-episodes 50 --eval-tasks 1,3,4,7` (its configurations
+    and checkpoints, more episodes); libero_object_reading_oracle.yaml trains the same readings on the oracle's
+    features, converted by the data stage with --oracle, and evaluates them with the env's oracle on the
+    confirmation's episodes."""
     sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
     screen = Sweep.load(sweeps / "libero_object_reading.yaml")
-    confirm = Sweep.load(sweeps / "libero_object_reading_confirm.yaml")
     oracle = Sweep.load(sweeps / "libero_object_reading_oracle.yaml")
-    assert confirm.configs == screen.configs
-    for sweep in (confirm, oracle):
-        assert sweep.settings.eval_tasks == [1, 3, 4, 7] and sweep.settings.n_episodes == 50
-        assert sweep.settings.steps == screen.settings.steps and sweep.settings.seeds == screen.settings.seeds
+    assert predvla_main(["sweep", str(sweeps / "libero_object_reading.yaml"), "--runs-dir", str(tmp_path / "confirm"),
+                         "--configs", "table2,table2_open_loop", "--n-episodes", "50", "--eval-tasks", "1,3,4,7",
+                         "--dry-run"]) == 0
+    evaluations = [line for line in capsys.readouterr().out.splitlines() if "lerobot-eval" in line]
+    assert len(evaluations) == 8  # two modes x four tasks, one lerobot-eval each
+    assert all("--eval.n_episodes=50" in line and "--env.init_states=true" in line for line in evaluations)
+    assert sorted(line.rsplit("task_ids=[", 1)[1][0] for line in evaluations) == sorted("13471347")
+    assert oracle.settings.eval_tasks == [1, 3, 4, 7] and oracle.settings.n_episodes == 50
+    assert oracle.settings.steps == screen.settings.steps and oracle.settings.seeds == screen.settings.seeds
     screen_runner, oracle_runner = Runner(screen, tmp_path / "screen"), Runner(oracle, tmp_path / "oracle")
     for name, spec in screen.configs.items():
         twin = oracle.configs[f"oracle_{name}"]

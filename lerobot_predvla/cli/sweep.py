@@ -33,6 +33,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--suites", type=_names, default=None, help="Comma-separated suites (replace the file's).")
     parser.add_argument("--steps", type=int, default=None, help="Training steps for every configuration.")
     parser.add_argument("--n-episodes", type=int, default=None, help="Rollouts per task for every configuration.")
+    parser.add_argument("--eval-tasks", type=_ints, default=None,
+                        help="Comma-separated task ids to evaluate, task by task (replace the file's eval.tasks).")
     parser.add_argument("--episode-length", type=int, default=None, help="Control-step cap per rollout.")
     parser.add_argument("--device", default=None, help="Device for training and evaluation (e.g. cpu, cuda).")
     parser.add_argument("--accelerate-processes", type=int, default=None,
@@ -63,6 +65,7 @@ def apply_flags(sweep: Sweep, args: argparse.Namespace) -> None:
     s.steps = args.steps or s.steps
     s.n_episodes = args.n_episodes or s.n_episodes
     s.episode_length = args.episode_length or s.episode_length
+    s.eval_tasks = args.eval_tasks or s.eval_tasks
     if args.device:
         s.train_device = s.eval_device = args.device
     s.accelerate_processes = args.accelerate_processes or s.accelerate_processes
