@@ -87,6 +87,24 @@ def test_the_reading_screen_changes_one_reading_per_configuration(tmp_path):
     assert sweep.settings.eval_tasks == [1, 4, 7] and sweep.settings.n_episodes == 10
 
 
+def test_the_second_screen_changes_one_learning_rate_and_keeps_the_first_screens_protocol(tmp_path):
+    """configs/sweeps/libero_object_lr_screen.yaml: each reading is Table 2 with one learning rate changed, trained
+    and evaluated exactly as the first screen's `table2` (its reference on the same episodes)."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    first, second = (Sweep.load(sweeps / f) for f in ("libero_object_reading.yaml", "libero_object_lr_screen.yaml"))
+    reference = Runner(first, tmp_path / "first").train_command(first.configs["table2"], "libero_object", 0)
+    runner = Runner(second, tmp_path / "second")
+    for name, field in (("network_lr", "optimizer_lr"), ("posterior_lr", "posterior_lr")):
+        train = runner.train_command(second.configs[name], "libero_object", 0)
+        assert f"--policy.{field}=0.001" in train
+        differ = {a.split("=")[0] for a in set(train) ^ set(reference)}
+        assert differ <= {f"--policy.{field}", "--output_dir", "--job_name"}, differ
+        assert second.configs[f"{name}_gd"].eval_overrides == first.configs["table2_gd"].eval_overrides
+        assert second.configs[f"{name}_open_loop"].eval_args == first.configs["table2_open_loop"].eval_args
+    for field in ("eval_tasks", "n_episodes", "episode_length", "steps", "batch_size", "seeds", "datasets"):
+        assert getattr(second.settings, field) == getattr(first.settings, field), field
+
+
 def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_same_episodes(tmp_path, capsys):
     """The confirmation is the screen's own sweep file with `--n-episodes 50 --eval-tasks 1,3,4,7` (its configurations
     and checkpoints, more episodes); libero_object_reading_oracle.yaml trains the same readings on the oracle's
