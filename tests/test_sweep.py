@@ -217,6 +217,30 @@ def test_bad_sweep_files_name_the_problem(tmp_path, capsys):
         assert message in err and str(path) in err
 
 
+def test_extends_takes_every_setting_but_the_configurations_from_a_file_in_the_same_folder(tmp_path, capsys):
+    base = sweep_file(tmp_path, seeds=[3], train={"device": "cpu", "steps": 77}, eval={"device": "cpu", "tasks": [2]})
+    second = tmp_path / "second.yaml"
+    second.write_text(yaml.safe_dump({"extends": base.name, "configs": [{"name": "fast", "group": "main"}]}))
+    sweep = Sweep.load(second)
+    assert list(sweep.configs) == ["fast"] and sweep.settings == Sweep.load(base).settings
+    assert sweep.settings.seeds == [3] and sweep.settings.steps == 77 and sweep.settings.eval_tasks == [2]
+    assert sweep.base_dir == base.parent  # the base file's relative paths mean the same in the second file
+
+    (tmp_path / "sub").mkdir()
+    cases = [
+        ({"extends": "sub/../sweep.yaml"}, "must name a sweep file in the same folder"),
+        ({"extends": "missing.yaml"}, "missing.yaml not found"),
+        ({"extends": base.name, "seeds": [0]}, "remove its own keys ['seeds']"),
+        ({"extends": "third.yaml"}, "extends another file itself"),
+    ]
+    (tmp_path / "third.yaml").write_text(yaml.safe_dump({"extends": base.name, "configs": [{"name": "y"}]}))
+    for changes, message in cases:
+        second.write_text(yaml.safe_dump({**changes, "configs": [{"name": "fast", "group": "main"}]}))
+        assert predvla_main(["sweep", str(second), "--runs-dir", str(tmp_path / "r"), "--dry-run"]) == 2
+        err = capsys.readouterr().err
+        assert message in err and str(second) in err
+
+
 def test_parse_eval_info_reads_lerobot_eval_output(tmp_path):
     path = tmp_path / "eval_info.json"
     path.write_text(json.dumps({"per_task": [

@@ -215,6 +215,37 @@ class Run:
         return f"{self.config}/{self.suite}/seed{self.seed}"
 
 
+TOP_LEVEL_KEYS = ("seeds", "suites", "datasets", "data", "train", "eval", "configs")
+
+
+def _read_mapping(path: Path) -> dict:
+    text = path.read_text()
+    raw = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
+    if not isinstance(raw, dict):
+        raise SweepError(f"{path}: expected a mapping with a non-empty `configs` list.")
+    return raw
+
+
+def _extended(path: Path, raw: dict) -> dict:
+    """`extends: <file>`: every setting but `configs` comes from a sweep file in the same folder, so a second screen
+    keeps the first one's protocol by construction (its relative paths mean the same in both files)."""
+    base_name = raw["extends"]
+    if not isinstance(base_name, str) or Path(base_name).name != base_name:
+        raise SweepError(f"{path}: `extends` must name a sweep file in the same folder, got {base_name!r}.")
+    own = sorted(set(raw) - {"extends", "configs"})
+    if own:
+        raise SweepError(
+            f"{path}: a file with `extends` takes every setting from {base_name}; remove its own keys {own}."
+        )
+    base_path = path.parent / base_name
+    if not base_path.is_file():
+        raise SweepError(f"{path}: `extends`: sweep file {base_path} not found.")
+    base = _read_mapping(base_path)
+    if "extends" in base:
+        raise SweepError(f"{path}: `extends`: {base_path} extends another file itself; name that file instead.")
+    return {**{k: v for k, v in base.items() if k != "configs"}, "configs": raw["configs"]}
+
+
 @dataclass
 class Sweep:
     settings: Settings
@@ -226,16 +257,14 @@ class Sweep:
         path = Path(path)
         if not path.is_file():
             raise SweepError(f"{path}: sweep file not found.")
-        text = path.read_text()
-        if path.suffix == ".json":
-            raw = json.loads(text)
-        else:
-            raw = yaml.safe_load(text)
-        if not isinstance(raw, dict) or not raw.get("configs"):
+        raw = _read_mapping(path)
+        if not raw.get("configs"):
             raise SweepError(f"{path}: expected a mapping with a non-empty `configs` list.")
-        unknown = set(raw) - {"seeds", "suites", "datasets", "data", "train", "eval", "configs"}
+        unknown = set(raw) - set(TOP_LEVEL_KEYS) - {"extends"}
         if unknown:
             raise SweepError(f"{path}: unknown top-level keys {sorted(unknown)}.")
+        if "extends" in raw:
+            raw = _extended(path, raw)
         train, evaluation = raw.get("train", {}), raw.get("eval", {})
         try:
             settings = Settings(
