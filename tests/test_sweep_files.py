@@ -101,8 +101,29 @@ def test_the_second_screen_changes_one_learning_rate_and_keeps_the_first_screens
         assert differ <= {f"--policy.{field}", "--output_dir", "--job_name"}, differ
         assert second.configs[f"{name}_gd"].eval_overrides == first.configs["table2_gd"].eval_overrides
         assert second.configs[f"{name}_open_loop"].eval_args == first.configs["table2_open_loop"].eval_args
-    for field in ("eval_tasks", "n_episodes", "episode_length", "steps", "batch_size", "seeds", "datasets"):
-        assert getattr(second.settings, field) == getattr(first.settings, field), field
+    assert second.settings == first.settings  # `extends`
+
+
+def test_the_follow_up_evaluates_the_screens_open_loop_term_model_with_one_inference_setting_changed(tmp_path):
+    """configs/sweeps/libero_object_olt_er.yaml: the screen's open_loop_term training and open loop unchanged (so the
+    linked runs are found, not repeated), and each error-regression setting one field away from Table 2's."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    screen, follow_up = (Sweep.load(sweeps / f) for f in ("libero_object_reading.yaml", "libero_object_olt_er.yaml"))
+    assert follow_up.settings == screen.settings
+    for name in ("open_loop_term", "open_loop_term_open_loop"):
+        assert follow_up.configs[name] == screen.configs[name], name
+    changed = {"olt_carried": {"er_adam_state": "carried"}, "olt_eta_0005": {"er_lr": 0.005},
+               "olt_w_er_10": {"er_complexity_weight": 10.0}, "olt_proprio_only": {"er_lambda_v": 0.0}}
+    assert set(follow_up.configs) == {"open_loop_term", "open_loop_term_open_loop", *changed}
+    runner = Runner(follow_up, tmp_path)
+    reference = runner.eval_command(Run("open_loop_term", "libero_object", 0), tmp_path / "ckpt")
+    for name, overrides in changed.items():
+        spec = follow_up.configs[name]
+        assert spec.checkpoint_from == "open_loop_term" and spec.compare_to == "open_loop_term_open_loop"
+        assert spec.eval_overrides == overrides
+        command = runner.eval_command(Run(name, "libero_object", 0), tmp_path / "ckpt")
+        differ = {a.split("=")[0] for a in set(command) ^ set(reference)}
+        assert differ <= {f"--policy.{next(iter(overrides))}", "--output_dir"}, differ
 
 
 def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_same_episodes(tmp_path, capsys):
