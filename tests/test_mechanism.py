@@ -10,9 +10,12 @@ and acts through `select_action`. What holds, and what the tests assert (docs/re
 - open loop stays at or below chance.
 """
 
+import argparse
+
 import pytest
 import torch
 
+from lerobot_predvla.cli.mechanism import reading
 from lerobot_predvla.experiments.mechanism import (
     ReachTask,
     follows_swapped_posteriors,
@@ -67,3 +70,11 @@ def test_the_target_reaches_the_actions_through_a_bottom_posteriors_only(trained
     assert follows_swapped_posteriors(TASK, policy, record, (A_BOTTOM,)) > 0.5
     for module in (T, V, A_TOP):
         assert follows_swapped_posteriors(TASK, policy, record, (module,)) == 0.0
+
+
+def test_a_reading_names_its_fields_and_keeps_the_commas_of_a_list():
+    assert reading("w:complexity_weights=[0.05,0.02,1,1],er_lr=0.01") == (
+        "w", {"complexity_weights": [0.05, 0.02, 1, 1], "er_lr": 0.01})
+    assert reading("table2:") == ("table2", {}) and reading("gd:er_optimizer=gd") == ("gd", {"er_optimizer": "gd"})
+    with pytest.raises(argparse.ArgumentTypeError, match="expected name:field=value"):
+        reading("bad:er_lr")

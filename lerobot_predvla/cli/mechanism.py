@@ -9,6 +9,7 @@ posteriors when only one module's are swapped in), and writes the same as JSON w
 
 import argparse
 import json
+import re
 import time
 from pathlib import Path
 
@@ -27,10 +28,11 @@ from lerobot_predvla.utils.io import atomic_write_json
 
 
 def reading(text: str) -> tuple[str, dict]:
-    """"name:field=value,field=value" -> (name, {field: value}) with values parsed as JSON where they parse."""
+    """"name:field=value,field=value" -> (name, {field: value}) with values parsed as JSON where they parse (a list
+    such as complexity_weights=[0.05,0.02,1,1] keeps its commas)."""
     name, _, body = text.partition(":")
     fields = {}
-    for item in filter(None, body.split(",")):
+    for item in filter(None, re.split(r",(?![^\[\]]*\])", body)):
         key, sep, value = item.partition("=")
         if not sep:
             raise argparse.ArgumentTypeError(f"{text!r}: expected name:field=value,... (got {item!r})")
