@@ -417,6 +417,37 @@ def test_open_loop_term_trains_the_prior_chain_on_the_same_episodes(trained_poli
         PredVLAConfig(open_loop_weight=-1.0)
 
 
+def test_posteriors_that_do_not_fit_the_actions_get_the_gradient_of_what_error_regression_sees(trained_policy):
+    """`posteriors_fit_actions=False` (a departure from Eq. 10): the same losses and the same network gradients, but
+    the posteriors' gradient is that of the prediction errors and the complexity only (as with lambda_a = 0)."""
+    policy, episodes = trained_policy.train(), torch.tensor([1, 4, 6])
+    cfg = policy.config
+
+    def gradients() -> tuple[float, dict, torch.Tensor, dict]:
+        policy.zero_grad()
+        policy.posterior_store.discard_pending()
+        loss, terms = policy.forward({"episode_index": episodes})
+        loss.backward()
+        [(_, rows)] = policy.posterior_store.pending_gradients()
+        weights = {n: p.grad.clone() for n, p in policy.model.named_parameters() if p.grad is not None}
+        return loss.item(), terms, rows.grad.clone(), weights
+
+    try:
+        loss, terms, post_grad, weights = gradients()
+        cfg.posteriors_fit_actions = False
+        loss_free, terms_free, post_free, weights_free = gradients()
+        cfg.posteriors_fit_actions, cfg.lambda_a = True, 0.0
+        _, _, post_no_action, _ = gradients()
+    finally:
+        cfg.posteriors_fit_actions, cfg.lambda_a = True, 1.0
+        policy.posterior_store.discard_pending()  # gradients for inspection only: not a training step
+        policy.eval()
+    assert loss_free == pytest.approx(loss, rel=1e-6) and terms_free == pytest.approx(terms, rel=1e-6)
+    assert weights_free.keys() == weights.keys()
+    assert all(torch.allclose(weights_free[n], weights[n], atol=1e-6, rtol=1e-4) for n in weights)
+    assert torch.allclose(post_free, post_no_action, atol=1e-7) and not torch.allclose(post_free, post_grad, atol=1e-7)
+
+
 @pytest.mark.parametrize("omp", [None, "2"])
 def test_acting_on_the_cpu_runs_on_one_thread_unless_omp_num_threads_is_set(monkeypatch, omp):
     """select_action runs error regression on one torch thread on the CPU (small matmuls stall on shared cores with

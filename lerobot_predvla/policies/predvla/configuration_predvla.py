@@ -76,6 +76,12 @@ class PredVLAConfig(CachedFeaturesConfig):
         open_loop_weight: Weight beta >= 0 of a training term not in the paper: Eq. 10's accuracy and action terms
             again on the open-loop rollout, every posterior at its prior (the rollout of `er_iterations=0`). 0
             (default) is Eq. 10 alone; it trains the prior chain that acting starts from.
+        posteriors_fit_actions: True (default, Eq. 10 as written): each training posterior follows the gradient of
+            all four terms, the action likelihood included. False, a departure: the action term reaches the network
+            only (it is computed on a second rollout from the same posteriors, detached), so a training posterior is
+            fitted to what error regression fits it to at test (the prediction errors and the complexity) and the
+            network must read the actions from such states (docs/research/dynamics.md, the mechanism task). The
+            losses are unchanged; training runs the recurrence twice.
         use_amp: LeRobot's field (default False: float32). True trains the recurrence and the heads in bfloat16
             under lerobot-train's autocast, the losses, posteriors and Adam states staying float32; error regression
             and the front end always run in full precision (docs/speed.md, "Mixed precision").
@@ -136,6 +142,7 @@ class PredVLAConfig(CachedFeaturesConfig):
     complexity_weights: tuple[float, float, float, float] = (0.05, 0.02, 0.02, 0.01)
     complexity_reduction: str = "sum"
     open_loop_weight: float = 0.0  # not in Table 2: 0 is the paper's Eq. 10
+    posteriors_fit_actions: bool = True  # False is not the paper's Eq. 10
 
     # Online error regression (Table 2).
     er_window: int = 40

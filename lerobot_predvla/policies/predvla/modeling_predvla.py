@@ -49,15 +49,18 @@ def refresh_mask(valid: Tensor, interval: int) -> Tensor:
 def training_terms(model: PredictiveModel, cfg: PredVLAConfig, seq: dict[str, Tensor], c_q: Tensor,
                    lang_term: Tensor) -> dict[str, Tensor]:
     """The four terms of Eq. 10 (unweighted) on the rollout driven by the posteriors c_q (time, batch, 4r) of the
-    sequences `seq` (`EpisodeSequences.batch`)."""
+    sequences `seq` (`EpisodeSequences.batch`). Without `cfg.posteriors_fit_actions` the action term comes from the
+    same rollout with c_q detached: the same value, no gradient into the posteriors."""
     valid = seq["valid"]
     traj = model.rollout(model.initial_state(valid.shape[1]), lang_term, c_q)
     eps_v, eps_q = model.prediction_errors(traj, seq["vision"], seq["state"])
     complexity = model.complexity(c_q, model.priors(traj), cfg.complexity_weights)
+    acting = traj if cfg.posteriors_fit_actions else model.rollout(
+        model.initial_state(valid.shape[1]), lang_term, c_q.detach())
     return {
         "vision_error": masked_mean(eps_v, refresh_mask(valid, cfg.visual_refresh_interval)),
         "proprio_error": masked_mean(eps_q, valid),
-        "action_nll": masked_mean(model.action_nll(traj, seq["action"]), valid),
+        "action_nll": masked_mean(model.action_nll(acting, seq["action"]), valid),
         "complexity": training_complexity(complexity, valid, cfg.complexity_reduction),
     }
 
