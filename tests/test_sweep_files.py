@@ -87,21 +87,31 @@ def test_the_reading_screen_changes_one_reading_per_configuration(tmp_path):
     assert sweep.settings.eval_tasks == [1, 4, 7] and sweep.settings.n_episodes == 10
 
 
-def test_the_second_screen_changes_one_learning_rate_and_keeps_the_first_screens_protocol(tmp_path):
-    """configs/sweeps/libero_object_lr_screen.yaml: each reading is Table 2 with one learning rate changed, trained
-    and evaluated exactly as the first screen's `table2` (its reference on the same episodes)."""
+@pytest.mark.parametrize(("sweep_name", "readings"), [
+    ("libero_object_lr_screen.yaml",
+     {"network_lr": {"optimizer_lr": "0.001"}, "posterior_lr": {"posterior_lr": "0.001"}}),
+    ("libero_object_fit_sensory.yaml",
+     {"fit_sensory": {"posteriors_fit_actions": "false"},
+      "fit_sensory_olt": {"posteriors_fit_actions": "false", "open_loop_weight": "1.0"}}),
+])
+def test_a_later_screen_changes_only_its_fields_and_keeps_the_first_screens_protocol(tmp_path, sweep_name, readings):
+    """A later screen (the learning rates; the posteriors fitted without the action term): each reading is Table 2
+    with only its fields changed, trained and evaluated exactly as the first screen's `table2` (its reference on the
+    same episodes)."""
     sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
-    first, second = (Sweep.load(sweeps / f) for f in ("libero_object_reading.yaml", "libero_object_lr_screen.yaml"))
+    first, later = (Sweep.load(sweeps / f) for f in ("libero_object_reading.yaml", sweep_name))
+    assert later.settings == first.settings  # `extends`
     reference = Runner(first, tmp_path / "first").train_command(first.configs["table2"], "libero_object", 0)
-    runner = Runner(second, tmp_path / "second")
-    for name, field in (("network_lr", "optimizer_lr"), ("posterior_lr", "posterior_lr")):
-        train = runner.train_command(second.configs[name], "libero_object", 0)
-        assert f"--policy.{field}=0.001" in train
+    runner = Runner(later, tmp_path / "later")
+    for name, fields in readings.items():
+        train = runner.train_command(later.configs[name], "libero_object", 0)
+        assert all(f"--policy.{field}={value}" in train for field, value in fields.items()), train
         differ = {a.split("=")[0] for a in set(train) ^ set(reference)}
-        assert differ <= {f"--policy.{field}", "--output_dir", "--job_name"}, differ
-        assert second.configs[f"{name}_gd"].eval_overrides == first.configs["table2_gd"].eval_overrides
-        assert second.configs[f"{name}_open_loop"].eval_args == first.configs["table2_open_loop"].eval_args
-    assert second.settings == first.settings  # `extends`
+        assert differ <= {*(f"--policy.{f}" for f in fields), "--output_dir", "--job_name"}, differ
+        assert later.configs[f"{name}_open_loop"].eval_args == first.configs["table2_open_loop"].eval_args
+        assert later.configs[f"{name}_open_loop"].eval_overrides == first.configs["table2_open_loop"].eval_overrides
+        if f"{name}_gd" in later.configs:
+            assert later.configs[f"{name}_gd"].eval_overrides == first.configs["table2_gd"].eval_overrides
 
 
 def test_the_follow_up_evaluates_the_screens_open_loop_term_model_with_one_inference_setting_changed(tmp_path):
