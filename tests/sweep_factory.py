@@ -37,6 +37,11 @@ def cli_flags(**given) -> argparse.Namespace:
     return argparse.Namespace(**{**dict.fromkeys(names), **given})
 
 
+def differing_flags(command: list[str], reference: list[str]) -> set[str]:
+    """The flag names (before `=`) of the arguments that only one of two commands has."""
+    return {a.split("=")[0] for a in set(command) ^ set(reference)}
+
+
 def arg(command: list[str], name: str) -> str | None:
     return next((c.split("=", 1)[1] for c in command if c.startswith(f"--{name}=")), None)
 

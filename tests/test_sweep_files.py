@@ -5,7 +5,7 @@ import json
 from pathlib import Path
 
 import pytest
-from sweep_factory import FakeLeRobot, arg, sweep_file
+from sweep_factory import FakeLeRobot, arg, differing_flags, sweep_file
 
 from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.experiments.sweep import (
@@ -106,7 +106,7 @@ def test_a_later_screen_changes_only_its_fields_and_keeps_the_first_screens_prot
     for name, fields in readings.items():
         train = runner.train_command(later.configs[name], "libero_object", 0)
         assert all(f"--policy.{field}={value}" in train for field, value in fields.items()), train
-        differ = {a.split("=")[0] for a in set(train) ^ set(reference)}
+        differ = differing_flags(train, reference)
         assert differ <= {*(f"--policy.{f}" for f in fields), "--output_dir", "--job_name"}, differ
         assert later.configs[f"{name}_open_loop"].eval_args == first.configs["table2_open_loop"].eval_args
         assert later.configs[f"{name}_open_loop"].eval_overrides == first.configs["table2_open_loop"].eval_overrides
@@ -132,7 +132,7 @@ def test_the_follow_up_evaluates_the_screens_open_loop_term_model_with_one_infer
         assert spec.checkpoint_from == "open_loop_term" and spec.compare_to == "open_loop_term_open_loop"
         assert spec.eval_overrides == overrides
         command = runner.eval_command(Run(name, "libero_object", 0), tmp_path / "ckpt")
-        differ = {a.split("=")[0] for a in set(command) ^ set(reference)}
+        differ = differing_flags(command, reference)
         assert differ <= {f"--policy.{next(iter(overrides))}", "--output_dir"}, differ
 
 
@@ -161,7 +161,7 @@ def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_sa
         if spec.checkpoint_from is None:  # the same training command but for the dataset
             ours = oracle_runner.train_command(twin, "libero_object", 0)
             theirs = screen_runner.train_command(spec, "libero_object", 0)
-            differ = {a.split("=")[0] for a in set(ours) ^ set(theirs)}
+            differ = differing_flags(ours, theirs)
             assert differ <= {"--dataset.repo_id", "--dataset.root", "--output_dir", "--job_name"}, differ
     evaluation = oracle_runner.eval_command(Run("oracle_mean_gd", "libero_object", 0), tmp_path / "ckpt")
     assert "--env.oracle=true" in evaluation and "--policy.er_optimizer=gd" in evaluation
