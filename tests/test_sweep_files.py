@@ -139,8 +139,8 @@ def test_the_follow_up_evaluates_the_screens_open_loop_term_model_with_one_infer
 def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_same_episodes(tmp_path, capsys):
     """The confirmation is the screen's own sweep file with `--n-episodes 50 --eval-tasks 1,3,4,7` (its configurations
     and checkpoints, more episodes); libero_object_reading_oracle.yaml trains the same readings on the oracle's
-    features, converted by the data stage with --oracle, and evaluates them with the env's oracle on the
-    confirmation's episodes."""
+    features (the later fit_sensory screen's too), converted by the data stage with --oracle, and evaluates them with
+    the env's oracle on the confirmation's episodes."""
     sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
     screen = Sweep.load(sweeps / "libero_object_reading.yaml")
     oracle = Sweep.load(sweeps / "libero_object_reading_oracle.yaml")
@@ -154,7 +154,8 @@ def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_sa
     assert oracle.settings.eval_tasks == [1, 3, 4, 7] and oracle.settings.n_episodes == 50
     assert oracle.settings.steps == screen.settings.steps and oracle.settings.seeds == screen.settings.seeds
     screen_runner, oracle_runner = Runner(screen, tmp_path / "screen"), Runner(oracle, tmp_path / "oracle")
-    for name, spec in screen.configs.items():
+    later = Sweep.load(sweeps / "libero_object_fit_sensory.yaml")  # the later screen's readings have twins too
+    for name, spec in {**screen.configs, **later.configs}.items():
         twin = oracle.configs[f"oracle_{name}"]
         assert twin.eval_overrides == spec.eval_overrides and twin.checkpoint_from == (
             spec.checkpoint_from and f"oracle_{spec.checkpoint_from}")
