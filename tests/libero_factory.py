@@ -2,6 +2,9 @@
 
 import argparse
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import h5py
@@ -10,6 +13,7 @@ import numpy as np
 from lerobot_predvla.cli import convert as convert_cmd
 from lerobot_predvla.cli import fit_frontend as fit_frontend_cmd
 
+BIN = Path(sys.executable).parent  # the environment's console scripts: lerobot-train, lerobot-eval, predvla
 IMAGE_SIZE = 128
 RAW_TOP_ROWS = 4  # Raw (upside-down) images carry a pure red band in their first rows.
 
@@ -70,6 +74,13 @@ def write_libero_file(
             demo.attrs["model_file"] = "<mujoco/>"
             written[f"demo_{i}"] = arrays
     return written
+
+
+def run(cmd: list[str]) -> str:
+    """A console command offline; its output. Fails the test, with the output's end, when it exits non-zero."""
+    result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    return result.stdout + result.stderr
 
 
 def run_cli(argv: list[str]) -> int:

@@ -5,15 +5,13 @@ The checkpoint is trained for two steps on a converted dataset whose front end w
 """
 
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from libero_factory import write_libero_file
+from libero_factory import BIN, run, write_libero_file
 from test_conversion import SUITE, convert, run_cli
 
 from lerobot_predvla.columns import OBS_IMAGE_FRESH, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
@@ -22,15 +20,8 @@ from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
 
 pytestmark = pytest.mark.simulator
 
-BIN = Path(sys.executable).parent
 SOUP = "pick up the alphabet soup and place it in the basket"  # libero_object task 0
 EPISODE_STEPS = 9
-
-
-def run(cmd: list[str]) -> str:
-    result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    return result.stdout + result.stderr
 
 
 @pytest.fixture(scope="module")

@@ -5,6 +5,7 @@ scripted-expert episode, physics only).
 """
 
 import json
+import subprocess
 
 import h5py
 import numpy as np
@@ -14,7 +15,7 @@ from lerobot.configs.types import PipelineFeatureType
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.lerobot_types import TransitionKey
 from lerobot.utils.constants import OBS_ENV_STATE
-from libero_factory import run_cli, write_libero_file
+from libero_factory import BIN, run, run_cli, write_libero_file
 from scipy.spatial.transform import Rotation
 
 from lerobot_predvla.columns import FRONTEND_META_DIR, OBS_VISION_FEATURES
@@ -69,6 +70,22 @@ def test_artefact_keeps_the_oracle_and_rejects_a_bad_one(frontend_dir, tmp_path)
     (tmp_path / "oracle" / "frontend.json").write_text(json.dumps(meta))
     with pytest.raises(FrontendArtefactError, match="oracle section.*std > 0"):
         FrontendArtefact.load(tmp_path / "oracle")
+
+
+def test_a_policy_reads_the_oracle_front_end_only_when_built_for_its_size(frontend_dir, tmp_path):
+    """The policy's processors take the oracle's poses as one block of visual features (the artefact's cameras are
+    not read); a policy built for another size is refused with the flag that fixes it."""
+    from lerobot_predvla.policies.common.processors import frontend_step
+    from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+
+    artefact = FrontendArtefact.load(frontend_dir)
+    artefact.oracle = OracleStandardisation(OBJECTS, np.zeros(18, np.float32), np.ones(18, np.float32))
+    directory = artefact.save(tmp_path / "oracle")
+    config = PredVLAConfig(frontend_dir=str(directory), vision_dim_per_camera=18, num_cameras=1, device="cpu")
+    assert frontend_step(config).frontend().artefact.oracle is not None
+    config.vision_dim_per_camera = 96  # the cameras' size: the oracle gives 18 numbers
+    with pytest.raises(FrontendArtefactError, match="--policy.vision_dim_per_camera=18"):
+        frontend_step(config)
 
 
 def test_processor_standardises_the_environment_state_instead_of_encoding_cameras(frontend_dir):
@@ -189,3 +206,22 @@ def test_convert_oracle_writes_standardised_poses_and_no_camera(expert_hdf5, fro
     argv = ["convert", "--dataset-root", str(out), "--frontend", str(frontend_dir), "--out", str(tmp_path / "x"),
             "--oracle"]
     assert run_cli(argv) == 2  # a LeRobot dataset has no simulator states
+
+    # PredVLA trains on it (the poses are one block of visual features) and lerobot-eval drives it from the live
+    # poses with error regression, no camera read.
+    train = [str(BIN / "lerobot-train"), "--policy.type=predvla", "--dataset.repo_id=local/oracle",
+             f"--dataset.root={out}", "--policy.push_to_hub=false", "--policy.device=cpu", "--num_workers=0",
+             "--steps=2", "--save_freq=2", "--batch_size=2", "--wandb.enable=false", "--policy.sequence_length=16",
+             "--policy.er_window=4", "--policy.er_iterations=2"]
+    refused = subprocess.run([*train, f"--output_dir={tmp_path / 'refused'}"], capture_output=True, text=True)
+    assert refused.returncode != 0 and "--policy.vision_dim_per_camera" in refused.stderr
+    run([*train, f"--policy.vision_dim_per_camera={2 * POSE_DIM}", f"--output_dir={tmp_path / 'train'}"])
+    checkpoint = tmp_path / "train" / "checkpoints" / "000002" / "pretrained_model"
+    run([str(BIN / "lerobot-eval"), f"--policy.path={checkpoint}", "--env.type=predvla_libero", f"--env.task={SUITE}",
+         "--env.task_ids=[0]", "--env.episode_length=6", "--env.oracle=true", "--eval.n_episodes=1",
+         "--eval.batch_size=1", "--eval.use_async_envs=false", "--policy.device=cpu",
+         f"--output_dir={tmp_path / 'eval'}"])
+    info = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
+    assert info["overall"]["n_episodes"] == 1
+    faults = info["predvla_faults"]
+    assert faults["nonfinite_actions"] == 0 and faults["policy"]["fallback_actions"] == 0, faults

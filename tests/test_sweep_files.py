@@ -163,7 +163,8 @@ def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_sa
             ours = oracle_runner.train_command(twin, "libero_object", 0)
             theirs = screen_runner.train_command(spec, "libero_object", 0)
             differ = differing_flags(ours, theirs)
-            assert differ <= {"--dataset.repo_id", "--dataset.root", "--output_dir", "--job_name"}, differ
+            assert differ <= {"--dataset.repo_id", "--dataset.root", "--output_dir", "--job_name",
+                              "--policy.vision_dim_per_camera"}, differ
     evaluation = oracle_runner.eval_command(Run("oracle_mean_gd", "libero_object", 0), tmp_path / "ckpt")
     assert "--env.oracle=true" in evaluation and "--policy.er_optimizer=gd" in evaluation
     spec = oracle.settings.data["libero_object"]

@@ -217,7 +217,8 @@ def validate_cached_features(config: CachedFeaturesConfig, policy_name: str) -> 
     if sizes[OBS_VISION_FEATURES] % config.vision_dim_per_camera:
         raise ValueError(
             f"'{OBS_VISION_FEATURES}' has {sizes[OBS_VISION_FEATURES]} dimensions, not a multiple of "
-            f"vision_dim_per_camera={config.vision_dim_per_camera}."
+            f"vision_dim_per_camera={config.vision_dim_per_camera}: set --policy.vision_dim_per_camera to the front "
+            f"end's components per camera (a dataset converted with --oracle: its {sizes[OBS_VISION_FEATURES]} poses)."
         )
     if sizes[OBS_LANGUAGE_FEATURES] != config.language_dim:
         raise ValueError(

@@ -20,6 +20,14 @@ def frontend_step(config: CachedFeaturesConfig) -> FrontendProcessorStep:
     if config.frontend_dir is None:
         return FrontendProcessorStep()
     artefact = FrontendArtefact.load(config.frontend_dir)
+    if artefact.oracle is not None:  # a diagnostic: the poses are one block of visual features, no camera is read
+        if (artefact.language_dim, artefact.vision_dim) != (config.language_dim, config.vision_dim):
+            raise FrontendArtefactError(
+                f"{config.frontend_dir}: the oracle front end gives {artefact.vision_dim} visual and "
+                f"{artefact.language_dim} language features, the policy was built for {config.vision_dim} and "
+                f"{config.language_dim} (train it with --policy.vision_dim_per_camera={artefact.vision_dim})."
+            )
+        return FrontendProcessorStep.from_artefact(artefact, refresh_interval=config.visual_refresh_interval)
     artefact.check_dims(
         config.language_dim, config.vision_dim_per_camera, list(artefact.cameras), config.frontend_dir
     )
