@@ -232,3 +232,26 @@ def test_the_paper_sweep_has_every_corruption_point():
     sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "paper.yaml")
     points = {(s.corruption["channel"], s.corruption["alpha"]) for s in sweep.configs.values() if s.corruption}
     assert points == {(c, a) for c in ("vision", "proprio") for a in (0.25, 0.5, 0.75, 1.0)}
+
+
+def test_the_full_scale_reading_run_is_table_2_with_only_the_reading_changed(tmp_path):
+    """configs/sweeps/libero_object_reading_full.yaml: Table 2's settings (by `extends`), its training command with
+    only the two reading fields added, and every evaluation of Table 2's seed-0 / seeds-1-2 / reset / A4 / A5 protocol
+    mirrored with the same episodes, overrides and pairing."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    table2, full = (Sweep.load(sweeps / f) for f in ("libero_object_table2.yaml", "libero_object_reading_full.yaml"))
+    assert full.settings == table2.settings
+    ours = Runner(full, tmp_path / "full").train_command(full.configs["predvla_reading"], "libero_object", 0)
+    theirs = Runner(table2, tmp_path / "t2").train_command(table2.configs["predvla_table2"], "libero_object", 0)
+    differ = differing_flags(ours, theirs)
+    assert differ == {"--policy.posteriors_fit_actions", "--policy.open_loop_weight", "--output_dir", "--job_name"}
+    assert {"--policy.posteriors_fit_actions=false", "--policy.open_loop_weight=1.0"} <= set(ours)
+    def ours_of(name: str | None) -> str | None:
+        return name and name.replace("predvla_table2", "predvla_reading")
+
+    for name, spec in full.configs.items():
+        twin = table2.configs[name.replace("predvla_reading", "predvla_table2")]
+        for field in ("eval_overrides", "eval_args", "n_episodes", "seeds", "init_states", "eval_seed", "group"):
+            assert getattr(spec, field) == getattr(twin, field), (name, field)
+        assert (spec.checkpoint_from, spec.compare_to, spec.pool_with) == tuple(
+            ours_of(x) for x in (twin.checkpoint_from, twin.compare_to, twin.pool_with)), name
