@@ -246,6 +246,7 @@ def test_the_full_scale_reading_run_is_table_2_with_only_the_reading_changed(tmp
     differ = differing_flags(ours, theirs)
     assert differ == {"--policy.posteriors_fit_actions", "--policy.open_loop_weight", "--output_dir", "--job_name"}
     assert {"--policy.posteriors_fit_actions=false", "--policy.open_loop_weight=1.0"} <= set(ours)
+
     def ours_of(name: str | None) -> str | None:
         return name and name.replace("predvla_table2", "predvla_reading")
 

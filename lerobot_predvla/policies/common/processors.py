@@ -27,15 +27,16 @@ def frontend_step(config: CachedFeaturesConfig) -> FrontendProcessorStep:
                 f"{artefact.language_dim} language features, the policy was built for {config.vision_dim} and "
                 f"{config.language_dim} (train it with --policy.vision_dim_per_camera={artefact.vision_dim})."
             )
-        return FrontendProcessorStep.from_artefact(artefact, refresh_interval=config.visual_refresh_interval)
-    artefact.check_dims(
-        config.language_dim, config.vision_dim_per_camera, list(artefact.cameras), config.frontend_dir
-    )
-    if len(artefact.cameras) != config.num_cameras:
-        raise FrontendArtefactError(
-            f"{config.frontend_dir}: the front end encodes {len(artefact.cameras)} cameras {list(artefact.cameras)}, "
-            f"the policy was built for {config.num_cameras} (its '{OBS_VISION_FEATURES}' features)."
+    else:
+        artefact.check_dims(
+            config.language_dim, config.vision_dim_per_camera, list(artefact.cameras), config.frontend_dir
         )
+        if len(artefact.cameras) != config.num_cameras:
+            raise FrontendArtefactError(
+                f"{config.frontend_dir}: the front end encodes {len(artefact.cameras)} cameras "
+                f"{list(artefact.cameras)}, the policy was built for {config.num_cameras} (its "
+                f"'{OBS_VISION_FEATURES}' features)."
+            )
     return FrontendProcessorStep.from_artefact(artefact, refresh_interval=config.visual_refresh_interval)
 
 
