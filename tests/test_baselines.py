@@ -54,12 +54,13 @@ def run(policy, observations: list[dict]) -> torch.Tensor:
         return torch.stack([policy.select_action(o) for o in observations])
 
 
-# Named CPU recipes beside the paper's rows (docs/research/libero_object_cpu.md).
-CPU_RECIPES = {"predvla_cpu", "predvla_cpu_lambda_q100"}
+# Named recipes beside the paper's rows: the CPU recipes (docs/research/libero_object_cpu.md) and the reading of
+# the full-scale dynamics run (docs/research/dynamics.md).
+NAMED_RECIPES = {"predvla_cpu", "predvla_cpu_lambda_q100", "predvla_fit_sensory_olt"}
 
 
 def test_every_table_row_has_a_config():
-    assert sorted(p.stem for p in CONFIGS.glob("*.json") if p.stem not in CPU_RECIPES) == sorted(PAPER_PARAMETERS)
+    assert sorted(p.stem for p in CONFIGS.glob("*.json") if p.stem not in NAMED_RECIPES) == sorted(PAPER_PARAMETERS)
 
 
 def test_cpu_recipe_keeps_the_paper_architecture():
@@ -77,6 +78,18 @@ def test_proprioceptive_recipe_departs_in_the_training_weight_only():
     assert (recipe.lambda_q, recipe.er_lambda_q) == (100.0, 1.0) == (100.0, PredVLAConfig().er_lambda_q)
     assert PredVLAConfig().lambda_q == base.lambda_q == 1.0
     assert {**vars(recipe), "lambda_q": base.lambda_q} == vars(base)
+    assert count_parameters(get_policy_class(recipe.type)(recipe)) == PAPER_PARAMETERS["predvla"][0]
+
+
+def test_fit_sensory_olt_recipe_departs_in_the_two_reading_fields_only():
+    """predvla_fit_sensory_olt is predvla.json (Table 2) with the training posteriors fitted without the action term
+    and the open-loop term on: same network, same training protocol, every other field at the paper's value."""
+    recipe, base = preset("predvla_fit_sensory_olt"), preset("predvla")
+    assert (recipe.posteriors_fit_actions, recipe.open_loop_weight) == (False, 1.0)
+    assert (base.posteriors_fit_actions, base.open_loop_weight) == (True, 0.0)
+    assert {**vars(recipe), "posteriors_fit_actions": True, "open_loop_weight": 0.0} == vars(base)
+    files = [json.loads((CONFIGS / f"{name}.json").read_text()) for name in ("predvla_fit_sensory_olt", "predvla")]
+    assert [{k: v for k, v in f.items() if k != "policy"} for f in files] == [{"steps": 30_000, "batch_size": 32}] * 2
     assert count_parameters(get_policy_class(recipe.type)(recipe)) == PAPER_PARAMETERS["predvla"][0]
 
 
