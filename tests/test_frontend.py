@@ -1,6 +1,5 @@
 """Frozen front end: preprocessing, encoders, PCA fitting and the artefact (offline, random ResNet18)."""
 
-import argparse
 import json
 from pathlib import Path
 
@@ -9,10 +8,9 @@ import pytest
 import torch
 from lerobot.envs.utils import preprocess_observation
 from lerobot.processor.env_processor import LiberoProcessorStep
-from libero_factory import RAW_TOP_ROWS, raw_images, write_libero_file
+from libero_factory import RAW_TOP_ROWS, raw_images, run_cli, write_libero_file
 from safetensors.numpy import load_file
 
-from lerobot_predvla.cli import fit_frontend as fit_frontend_cmd
 from lerobot_predvla.columns import HDF5_CAMERAS
 from lerobot_predvla.frontend import (
     FrontendArtefact,
@@ -30,13 +28,6 @@ from lerobot_predvla.frontend.vision import VisionEncoder, build_resnet18, modul
 
 INSTRUCTIONS = ["pick up the alphabet soup and place it in the basket", "open the top drawer of the cabinet",
                 "put the bowl on the plate"]
-
-
-def run_cli(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser()
-    fit_frontend_cmd.add_parser(parser.add_subparsers())
-    args = parser.parse_args(argv)
-    return args.func(args)
 
 
 @pytest.fixture(scope="module")

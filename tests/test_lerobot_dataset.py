@@ -6,9 +6,6 @@ Datasets are built with LeRobot's own API in two layouts (LIBERO community: stat
 """
 
 import json
-import os
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -20,13 +17,12 @@ import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.constants import OBS_STATE
 from lerobot_factory import LIBERO_COMMUNITY, SO101, Layout, make_dataset
-from test_conversion import run_cli
+from libero_factory import BIN, run, run_cli
 
 from lerobot_predvla.columns import FRONTEND_META_DIR, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.frontend import FrozenFrontend
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 
-BIN = Path(sys.executable).parent
 SOUP = "pick up the alphabet soup and place it in the basket"  # libero_object task 0
 MILK = "pick up the milk and place it in the basket"
 EPISODES = {
@@ -34,12 +30,6 @@ EPISODES = {
     "so101": (SO101, [("pick up the red cube", 6), ("put the cube in the box", 5), ("pick up the red cube", 4)]),
 }
 SIZES = {"libero": (8, 7, 2), "so101": (6, 6, 2)}  # state, action, cameras
-
-
-def run(cmd: list[str]) -> str:
-    result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "HF_HUB_OFFLINE": "1"})
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    return result.stdout + result.stderr
 
 
 def fit(source: Path, out: Path, *extra: str) -> int:

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import torch
 from lerobot.processor import PolicyProcessorPipeline
-from test_libero_eval import BIN, EPISODE_STEPS, SOUP, SUITE, checkpoint, run  # noqa: F401  (module fixture)
+from libero_factory import BIN, run
+from test_libero_eval import EPISODE_STEPS, SOUP, SUITE, checkpoint  # noqa: F401  (module fixture)
 
 from lerobot_predvla.columns import OBS_VISION_FEATURES
 from lerobot_predvla.frontend import FrozenFrontend

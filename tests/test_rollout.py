@@ -10,7 +10,6 @@ import json
 import logging
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ from lerobot.policies.utils import prepare_observation_for_inference
 from lerobot.processor import PolicyProcessorPipeline
 from lerobot.utils.constants import ACTION, OBS_STATE
 from lerobot_factory import SO101
+from libero_factory import BIN
 from test_lerobot_dataset import prepare
 from test_policy import randomised_policy, run, stream
 
@@ -31,7 +31,6 @@ from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
 from lerobot_predvla.policies.common.observation_guard import ObservationGuard
 from lerobot_predvla.robots.replay import as_camera_frame
 
-BIN = Path(sys.executable).parent
 SMALL = {"module_dims": (16, 32, 32, 32), "latent_dim": 8, "bottleneck_dim": 8, "head_hidden_dim": 32}  # fast ticks
 TASK = "pick up the red cube"  # an SO-101 training task of `prepare("so101")`
 
