@@ -192,19 +192,50 @@ def test_shipped_checkpoint_processors_follow_the_policy(checkpoint):
     assert [s.device for s in post.steps if isinstance(s, DeviceProcessorStep)] == ["cpu"]
 
 
-def test_push_clears_the_training_device(tmp_path):
+def test_push_clears_the_training_machine(tmp_path):
     config, train, pre = tmp_path / "config.json", tmp_path / "train_config.json", tmp_path / "policy_preprocessor.json"
-    config.write_text(json.dumps({"type": "predvla", "device": "cuda", "frontend_dir": "/data/frontend"}))
-    train.write_text(json.dumps({"policy": {"type": "predvla", "device": "cpu"}, "output_dir": "/runs/x"}))
-    steps = [{"registry_name": "predvla_frontend_processor", "config": {"artefact": None, "device": "cpu"}},
+    artefact = tmp_path / "frontend.json"
+    fit = {"hdf5_root": "/data/hdf5", "suites": ["libero_object"], "num_demos": 500}
+    config.write_text(json.dumps({"type": "predvla", "device": "cuda", "frontend_dir": "/data/frontend",
+                                  "pretrained_path": "/runs/x/checkpoints/last/pretrained_model"}))
+    train.write_text(json.dumps({"policy": {"type": "predvla", "device": "cpu", "pretrained_path": "/runs/x/p"},
+                                 "output_dir": "/runs/x", "checkpoint_path": "/runs/x/checkpoints/last"}))
+    steps = [{"registry_name": "predvla_frontend_processor",
+              "config": {"artefact": {"format": "predvla-frontend", "fit": dict(fit)}, "device": "cpu"}},
              {"registry_name": "device_processor", "config": {"device": "cpu", "float_dtype": None}}]
     pre.write_text(json.dumps({"name": "policy_preprocessor", "steps": steps}))
+    artefact.write_text(json.dumps({"format": "predvla-frontend", "fit": dict(fit)}))
     published = without_machine_paths({"config.json": config, "train_config.json": train,
-                                       "policy_preprocessor.json": pre})
-    assert json.loads(published["config.json"]) == {"type": "predvla", "device": None, "frontend_dir": None}
-    assert json.loads(published["train_config.json"])["policy"]["device"] is None
+                                       "policy_preprocessor.json": pre, "predvla_frontend/frontend.json": artefact})
+    assert json.loads(published["config.json"]) == {"type": "predvla", "device": None, "frontend_dir": None,
+                                                    "pretrained_path": None}
+    train_config = json.loads(published["train_config.json"])
+    assert train_config["policy"]["device"] is None and train_config["policy"]["pretrained_path"] is None
+    assert train_config["output_dir"] is None and train_config["checkpoint_path"] is None
+    cleared = {**fit, "hdf5_root": None}  # what the bases were fitted on stays; where it lay does not
     assert [s["config"] for s in json.loads(published["policy_preprocessor.json"])["steps"]] == [
-        {"artefact": None}, {"device": "cpu", "float_dtype": None}]  # LeRobot's loaders replace the device step's
+        {"artefact": {"format": "predvla-frontend", "fit": cleared}},
+        {"device": "cpu", "float_dtype": None}]  # LeRobot's loaders replace the device step's
+    assert json.loads(published["predvla_frontend/frontend.json"])["fit"] == cleared
+
+
+def absolute_paths(value) -> list[str]:
+    """Every string of a parsed JSON document that is an absolute POSIX path."""
+    if isinstance(value, dict):
+        return [p for v in value.values() for p in absolute_paths(v)]
+    if isinstance(value, list):
+        return [p for v in value for p in absolute_paths(v)]
+    return [value] if isinstance(value, str) and value.startswith("/") else []
+
+
+@pytest.mark.parametrize("checkpoint", SHIPPED)
+def test_shipped_checkpoints_name_no_path_of_the_training_machine(checkpoint):
+    path = REPO / "checkpoints" / checkpoint
+    found = {f.relative_to(path).as_posix(): absolute_paths(json.loads(f.read_text())) for f in path.rglob("*.json")}
+    assert not {name: paths for name, paths in found.items() if paths}
+    card = (path / "README.md").read_text()
+    assert not [p for paths in found.values() for p in paths if p in card]
+    assert "pretrained_path =" not in card  # the card's list of departures names no loading path
 
 
 def test_shipped_checkpoints_include_the_models_sweeps_publish():

@@ -44,7 +44,9 @@ PUSH_PATTERNS = ("*.safetensors", "*.json", "*.yaml", "*.md")  # what LeRobot's 
 # A saved folder's manifest lists that folder (posterior store included); each publishing route writes the manifest
 # of what it publishes instead.
 NEVER_PUSHED = (POSTERIOR_STORE_FILE, MANIFEST_FILE)
-MACHINE_FIELDS = ("frontend_dir", "device")  # policy config fields that name the training machine's resources
+# Policy config fields that name the training machine's resources: `pretrained_path` is where the checkpoint was
+# loaded from (LeRobot sets it on loading and on `--resume`).
+MACHINE_FIELDS = ("frontend_dir", "device", "pretrained_path")
 
 
 # ----- files ---------------------------------------------------------------------------------------------
@@ -91,16 +93,17 @@ def frontend_source(pretrained: Path, dataset_root: Path | None, override: Path 
 def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
     """The files as every route publishes them: the training machine's paths and device cleared from the configs.
 
-    `frontend_dir` (the artefact is published beside the weights and inside the preprocessor), the dataset root and
-    the output directory name places on the training machine only; loading ignores them once they are None. The
-    device is the training machine's too. LeRobot keeps a stored device that is available and picks the best
-    available one when it is None: `config.json`'s when loading the policy (`--policy.path`, `from_pretrained`), and
-    `train_config.json`'s policy device when training from it (`lerobot-train --config_path=...`, `--resume`). Both
-    are cleared. The processors keep theirs: a device step needs a device (None fails to load); `lerobot-eval`,
-    `lerobot-rollout`, `lerobot-train` and LeRobot's policy server replace the preprocessor's with the policy's, and
-    the postprocessor's `cpu` is where actions go (the environment or robot), not where the policy trained. The
-    front-end step's `device` of older checkpoints is ignored when loading (the encoders follow the images) and
-    dropped.
+    `frontend_dir` (the artefact is published beside the weights and inside the preprocessor), `pretrained_path`, the
+    dataset root, the output and checkpoint directories and the front end's fitting data (`fit.hdf5_root` of the
+    artefact, in `predvla_frontend/` and in the preprocessor) name places on the training machine only; loading
+    ignores them once they are None. The device is the training machine's too. LeRobot keeps a stored device that is
+    available and picks the best available one when it is None: `config.json`'s when loading the policy
+    (`--policy.path`, `from_pretrained`), and `train_config.json`'s policy device when training from it
+    (`lerobot-train --config_path=...`, `--resume`). Both are cleared. The processors keep theirs: a device step
+    needs a device (None fails to load); `lerobot-eval`, `lerobot-rollout`, `lerobot-train` and LeRobot's policy
+    server replace the preprocessor's with the policy's, and the postprocessor's `cpu` is where actions go (the
+    environment or robot), not where the policy trained. The front-end step's `device` of older checkpoints is
+    ignored when loading (the encoders follow the images) and dropped.
     """
     published: dict[str, Path | bytes] = dict(files)
     if "config.json" in files:
@@ -109,7 +112,7 @@ def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
             {**config, **{k: None for k in MACHINE_FIELDS if k in config}}, indent=4).encode()
     if "train_config.json" in files:
         train_cfg = read_json(files, "train_config.json")
-        train_cfg["output_dir"] = None
+        train_cfg["output_dir"] = train_cfg["checkpoint_path"] = None
         if isinstance(train_cfg.get("dataset"), dict):
             train_cfg["dataset"]["root"] = None
         if isinstance(train_cfg.get("policy"), dict):
@@ -120,8 +123,22 @@ def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
         for step in preprocessor.get("steps", []):
             if step.get("registry_name") == FRONTEND_STEP:
                 step.get("config", {}).pop("device", None)
+                without_fit_root(step.get("config", {}).get("artefact"))
         published[PREPROCESSOR_FILE] = json.dumps(preprocessor, indent=2).encode()  # LeRobot's layout
+    artefact_file = f"{FRONTEND_DIR}/{METADATA_FILE}"
+    if artefact_file in files:
+        artefact = read_json(files, artefact_file)
+        without_fit_root(artefact)
+        published[artefact_file] = (json.dumps(artefact, indent=2) + "\n").encode()  # `FrontendArtefact.save`'s
     return published
+
+
+def without_fit_root(artefact: dict | None) -> None:
+    """Clear, in place, the directory a front-end artefact's PCA bases were fitted on (its `fit.hdf5_root`); the
+    rest of `fit` (suites, demonstrations, frames) says what they were fitted on."""
+    fit = artefact.get("fit") if isinstance(artefact, dict) else None
+    if isinstance(fit, dict) and "hdf5_root" in fit:
+        fit["hdf5_root"] = None
 
 
 
