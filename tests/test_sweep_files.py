@@ -136,6 +136,34 @@ def test_the_follow_up_evaluates_the_screens_open_loop_term_model_with_one_infer
         assert differ <= {f"--policy.{next(iter(overrides))}", "--output_dir"}, differ
 
 
+@pytest.mark.parametrize(("sweep_name", "parent", "model"), [
+    ("libero_object_fit_sensory_er.yaml", "libero_object_fit_sensory.yaml", "fit_sensory_olt"),
+    ("libero_object_reading_oracle_er.yaml", "libero_object_reading_oracle.yaml", "oracle_fit_sensory"),
+])
+def test_the_update_follow_up_evaluates_a_trained_model_with_one_inference_setting_changed(tmp_path, sweep_name,
+                                                                                            parent, model):
+    """The error-regression update on the fit_sensory models: the parent run's settings and training unchanged (so the
+    linked training is found, not repeated), the exact open loop as the parent's (rendering only at reset, which
+    changes no action), and each update one field away from Table 2's error regression."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    base, follow_up = Sweep.load(sweeps / parent), Sweep.load(sweeps / sweep_name)
+    assert follow_up.settings == base.settings
+    assert follow_up.configs[model] == base.configs[model]
+    open_loop = follow_up.configs[f"{model}_open_loop"]
+    assert (open_loop.checkpoint_from, open_loop.eval_overrides) == (model, {"er_iterations": 0})
+    assert open_loop.eval_args == ["--env.render_interval=100000"]
+    changed = {f"{model}_carried": {"er_adam_state": "carried"}, f"{model}_gd": {"er_optimizer": "gd"}}
+    assert set(follow_up.configs) == {model, f"{model}_open_loop", *changed}
+    runner = Runner(follow_up, tmp_path)
+    reference = runner.eval_command(Run(model, "libero_object", 0), tmp_path / "ckpt")
+    for name, overrides in changed.items():
+        spec = follow_up.configs[name]
+        assert spec.checkpoint_from == model and spec.compare_to == f"{model}_open_loop"
+        assert spec.eval_overrides == overrides
+        command = runner.eval_command(Run(name, "libero_object", 0), tmp_path / "ckpt")
+        assert differing_flags(command, reference) <= {f"--policy.{next(iter(overrides))}", "--output_dir"}
+
+
 def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_same_episodes(tmp_path, capsys):
     """The confirmation is the screen's own sweep file with `--n-episodes 50 --eval-tasks 1,3,4,7` (its configurations
     and checkpoints, more episodes); libero_object_reading_oracle.yaml trains the same readings on the oracle's
