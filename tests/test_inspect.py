@@ -37,6 +37,8 @@ def test_inspect_reports_every_checkpoint_and_draws_the_figures(trained, tmp_pat
     assert all(p["mean_norm"] > 0 for p in last["posteriors"].values())  # 4 steps of Adam moved them
     er = last["error_regression"]
     assert er["er_action_mse"] >= 0 and er["open_loop_action_mse"] >= 0
+    for timing in (er["er_gripper_timing"], er["open_loop_gripper_timing"]):
+        assert set(timing) == {f"{e}{k}" for e in ("close", "release") for k in ("", "_abs", "_missing")}
     assert er["er_eps_v"] > 0 and er["er_eps_q"] > 0  # finite: the visual error of the refresh steps
     # Eq. 7's eps_q per proprioceptive dimension: open loop, from the training posteriors, and the demo floor.
     q = last["proprio_error_per_dim"]
@@ -189,3 +191,4 @@ def test_forces_split_the_gradient_by_term_and_weigh_the_decay_against_the_clipp
     expected = weight_decay * float(p.detach().norm()) / (report["clip_scale"] * norms["model.lang.weight"])
     assert w["model.lang.weight"]["decay_over_loss"] == pytest.approx(expected, rel=1e-3)
     assert all(r["momentum_decay_over_loss"] > 0 for r in w.values())
+

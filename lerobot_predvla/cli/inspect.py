@@ -51,7 +51,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--er-variant", action="append", default=[], metavar="KEY=VALUE[,KEY=VALUE]",
                    help="also replay error regression with these inference settings, one variant per flag "
                         "(keys: er_window, er_iterations, er_lr, er_adam_state (fresh or carried), "
-                        "er_complexity_weight, er_lambda_v, er_lambda_q)")
+                        "er_optimizer (adam or gd), er_complexity_weight, er_lambda_v, er_lambda_q)")
     p.add_argument("--every", type=int, default=None, metavar="N",
                    help="with a lerobot-train output directory: inspect only the checkpoints whose step is a multiple "
                         "of N, and the last one (default: every checkpoint)")
@@ -168,6 +168,9 @@ def print_summary(report: dict) -> None:
         er = report["error_regression"]
         print(f"error regression replayed on one demonstration per task: action MSE {er['er_action_mse']:.4f} "
               f"(open loop {er['open_loop_action_mse']:.4f}); eps_q {er['er_eps_q']:.4g}, eps_v {er['er_eps_v']:.4g}")
+        timing, open_loop = er["er_gripper_timing"], er["open_loop_gripper_timing"]
+        print(f"the gripper closes {timing['close']:+.1f} steps and reopens {timing['release']:+.1f} steps after the "
+              f"demonstrations' (open loop {open_loop['close']:+.1f}, {open_loop['release']:+.1f}; negative: early)")
         ratio = er.get("er_gap_over_training", {})
         if ratio and max(ratio.values()) > GAP_WARNING:
             module = max(ratio, key=ratio.get)
@@ -180,15 +183,18 @@ def print_summary(report: dict) -> None:
 
 
 def print_er_variants(er: dict, variants: list[dict]) -> None:
-    """The replayed variants beside the checkpoint's own settings (raw action MSE against the demonstrations)."""
-    print(f"\n{'error regression settings':<40} {'action MSE':>10} {'gripper MSE':>11} "
+    """The replayed variants beside the checkpoint's own settings (raw action MSE against the demonstrations, and
+    the steps by which the gripper closes and reopens after the demonstrations': negative is early)."""
+    print(f"\n{'error regression settings':<40} {'action MSE':>10} {'gripper MSE':>11} {'close':>6} {'release':>7} "
           + " ".join(f"{'gap ' + m:>12}" for m in MODULE_NAMES))
     rows = [("checkpoint's own", er), *((",".join(f"{k}={v}" for k, v in r["settings"].items()), r) for r in variants),
             ("exact open loop", {"er_action_mse": er["open_loop_action_mse"],
-                                 "er_gripper_mse": er["open_loop_gripper_mse"]})]
+                                 "er_gripper_mse": er["open_loop_gripper_mse"],
+                                 "er_gripper_timing": er["open_loop_gripper_timing"]})]
     for name, r in rows:
-        gaps = r.get("er_gap_per_module", {})
-        print(f"{name:<40} {r['er_action_mse']:>10.4f} {r['er_gripper_mse']:>11.4f} "
+        gaps, timing = r.get("er_gap_per_module", {}), r["er_gripper_timing"]
+        print(f"{name:<40} {r['er_action_mse']:>10.4f} {r['er_gripper_mse']:>11.4f} {timing['close']:>+6.1f} "
+              f"{timing['release']:>+7.1f} "
               + " ".join(f"{gaps[m]:>12.3f}" if m in gaps else f"{'':>12}" for m in MODULE_NAMES))
 
 

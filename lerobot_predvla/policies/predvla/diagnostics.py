@@ -31,7 +31,7 @@ from torch import Tensor
 from lerobot_predvla.policies.common.sequence_table import EpisodeSequences, read_columns
 from lerobot_predvla.utils.io import atomic_write_json
 
-from .configuration_predvla import ER_ADAM_STATES, MODULE_NAMES
+from .configuration_predvla import ER_ADAM_STATES, ER_OPTIMIZERS, MODULE_NAMES
 from .error_regression import ErrorRegression
 from .modeling_predvla import PredVLAPolicy, refresh_mask, term_weights, training_terms
 from .posterior_store import POSTERIOR_STORE_FILE
@@ -241,8 +241,39 @@ def replay_error_regression(policy: PredVLAPolicy, data: TaskData, episodes: lis
     return out
 
 
+def gripper_events(action: Tensor, valid: Tensor) -> Tensor:
+    """(batch, 2): the first step of each episode that closes the gripper (the last action dimension positive in raw
+    units, LIBERO's close command) and the first step after it that opens it again; NaN where it never happens
+    within the episode (`valid`, (time, batch))."""
+    closed = (action[..., -1] > 0) & valid
+    steps = torch.arange(len(action), dtype=torch.float)[:, None].expand_as(closed)
+    never = torch.full_like(steps, float("inf"))
+    close = torch.where(closed, steps, never).min(0).values
+    released = ~closed & valid & (steps > close)
+    release = torch.where(released, steps, never).min(0).values
+    return torch.stack([close, release], dim=-1).nan_to_num(posinf=float("nan"))
+
+
+def gripper_timing(replay: dict, data: TaskData, key: str) -> dict[str, float]:
+    """How many steps `replay[key]`'s gripper closes and reopens after the replayed demonstrations' (mean signed
+    difference: negative is early) and how far off on average (mean absolute difference), over the episodes where
+    both happen; `missing`: episodes where the demonstration's event happens and this one's does not."""
+    valid = replay["valid"]
+    demo = gripper_events(data.raw(replay["demo_action"]), valid)
+    mode = gripper_events(data.raw(replay[key]), valid)
+    lead = mode - demo
+    out = {}
+    for i, event in enumerate(("close", "release")):
+        both = ~lead[:, i].isnan()
+        out[event] = float(lead[both, i].mean()) if both.any() else float("nan")
+        out[f"{event}_abs"] = float(lead[both, i].abs().mean()) if both.any() else float("nan")
+        out[f"{event}_missing"] = int((~demo[:, i].isnan() & mode[:, i].isnan()).sum())
+    return out
+
+
 def er_summary(replay: dict, data: TaskData) -> dict:
-    """Action error of error regression and of open loop against the replayed demonstrations (raw units)."""
+    """Action error of error regression and of open loop against the replayed demonstrations (raw units), and when
+    each moves the gripper against the demonstrations (`gripper_timing`)."""
     valid = replay["valid"]
     demo = data.raw(replay["demo_action"])[valid]
     er = (data.raw(replay["action"])[valid] - demo).pow(2)
@@ -253,6 +284,8 @@ def er_summary(replay: dict, data: TaskData) -> dict:
         "open_loop_action_mse": float(ol.mean()),
         "er_gripper_mse": float(er[:, -1].mean()),  # the last action dimension
         "open_loop_gripper_mse": float(ol[:, -1].mean()),
+        "er_gripper_timing": gripper_timing(replay, data, "action"),
+        "open_loop_gripper_timing": gripper_timing(replay, data, "open_loop_action"),
         "er_gap_per_module": {name: float(gap[:, m].mean()) for m, name in enumerate(MODULE_NAMES)},
         "er_eps_q": float(replay["eps_q"][valid].mean()),
         "er_eps_v": float(replay["eps_v"][valid].nanmean()),
@@ -267,7 +300,8 @@ def gap_over_training(er: dict, posteriors: dict) -> dict[str, float]:
 
 # Inference settings an offline replay may vary (Table 2's "Online error regression" rows and the A4/A5 weights).
 ER_SETTINGS = {"er_window": int, "er_iterations": int, "er_lr": float, "er_complexity_weight": float,
-               "er_lambda_v": float, "er_lambda_q": float, "er_adam_state": str}
+               "er_lambda_v": float, "er_lambda_q": float, "er_adam_state": str, "er_optimizer": str}
+ER_CHOICES = {"er_adam_state": ER_ADAM_STATES, "er_optimizer": ER_OPTIMIZERS}  # the settings that name a choice
 
 
 def parse_er_variant(text: str) -> dict[str, int | float | str]:
@@ -283,10 +317,9 @@ def parse_er_variant(text: str) -> dict[str, int | float | str]:
         except ValueError:
             raise ValueError(f"--er-variant {text!r}: {key} needs a {ER_SETTINGS[key].__name__}, "
                              f"got {value!r}.") from None
-        if key == "er_adam_state":
-            if value not in ER_ADAM_STATES:
-                raise ValueError(f"--er-variant {text!r}: er_adam_state must be one of {ER_ADAM_STATES}, "
-                                 f"got {value!r}.")
+        if key in ER_CHOICES:
+            if value not in ER_CHOICES[key]:
+                raise ValueError(f"--er-variant {text!r}: {key} must be one of {ER_CHOICES[key]}, got {value!r}.")
             continue
         if not overrides[key] > 0 and key in ("er_window", "er_iterations", "er_lr"):
             raise ValueError(f"--er-variant {text!r}: {key} must be positive (er_iterations=0 is the open loop "
