@@ -125,11 +125,17 @@ def test_the_follow_up_evaluates_the_screens_open_loop_term_model_with_one_infer
     changed = {"olt_carried": {"er_adam_state": "carried"}, "olt_eta_0005": {"er_lr": 0.005},
                "olt_w_er_10": {"er_complexity_weight": 10.0}, "olt_proprio_only": {"er_lambda_v": 0.0}}
     assert set(follow_up.configs) == {"open_loop_term", "open_loop_term_open_loop", *changed}
+    assert_one_inference_setting_away(follow_up, "open_loop_term", changed, tmp_path)
+
+
+def assert_one_inference_setting_away(follow_up: Sweep, model: str, changed: dict[str, dict], tmp_path: Path) -> None:
+    """Each configuration of `changed` evaluates `model`'s checkpoint with its one error-regression override, paired
+    with `model`'s exact open loop, and its lerobot-eval command differs from `model`'s in that flag alone."""
     runner = Runner(follow_up, tmp_path)
-    reference = runner.eval_command(Run("open_loop_term", "libero_object", 0), tmp_path / "ckpt")
+    reference = runner.eval_command(Run(model, "libero_object", 0), tmp_path / "ckpt")
     for name, overrides in changed.items():
         spec = follow_up.configs[name]
-        assert spec.checkpoint_from == "open_loop_term" and spec.compare_to == "open_loop_term_open_loop"
+        assert spec.checkpoint_from == model and spec.compare_to == f"{model}_open_loop"
         assert spec.eval_overrides == overrides
         command = runner.eval_command(Run(name, "libero_object", 0), tmp_path / "ckpt")
         differ = differing_flags(command, reference)
@@ -154,14 +160,7 @@ def test_the_update_follow_up_evaluates_a_trained_model_with_one_inference_setti
     assert open_loop.eval_args == ["--env.render_interval=100000"]
     changed = {f"{model}_carried": {"er_adam_state": "carried"}, f"{model}_gd": {"er_optimizer": "gd"}}
     assert set(follow_up.configs) == {model, f"{model}_open_loop", *changed}
-    runner = Runner(follow_up, tmp_path)
-    reference = runner.eval_command(Run(model, "libero_object", 0), tmp_path / "ckpt")
-    for name, overrides in changed.items():
-        spec = follow_up.configs[name]
-        assert spec.checkpoint_from == model and spec.compare_to == f"{model}_open_loop"
-        assert spec.eval_overrides == overrides
-        command = runner.eval_command(Run(name, "libero_object", 0), tmp_path / "ckpt")
-        assert differing_flags(command, reference) <= {f"--policy.{next(iter(overrides))}", "--output_dir"}
+    assert_one_inference_setting_away(follow_up, model, changed, tmp_path)
 
 
 def test_the_confirmation_and_the_oracle_evaluate_the_screens_readings_on_the_same_episodes(tmp_path, capsys):

@@ -122,8 +122,9 @@ def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
         preprocessor = read_json(files, PREPROCESSOR_FILE)
         for step in preprocessor.get("steps", []):
             if step.get("registry_name") == FRONTEND_STEP:
-                step.get("config", {}).pop("device", None)
-                without_fit_root(step.get("config", {}).get("artefact"))
+                step_config = step.get("config", {})
+                step_config.pop("device", None)
+                without_fit_root(step_config.get("artefact"))
         published[PREPROCESSOR_FILE] = json.dumps(preprocessor, indent=2).encode()  # LeRobot's layout
     artefact_file = f"{FRONTEND_DIR}/{METADATA_FILE}"
     if artefact_file in files:
