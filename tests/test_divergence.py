@@ -1,4 +1,4 @@
-"""`predvla divergence`: the open loop against demonstrations from their own starts (issue 61, deliverable 2).
+"""`predvla divergence`: the open loop against demonstrations from their own starts.
 
 The helpers on synthetic arrays; then the real command on the simulator (physics only): two scripted-expert
 episodes written with the repository's demo writer (images left black: the command reads none), the shipped
