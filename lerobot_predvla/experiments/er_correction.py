@@ -28,6 +28,8 @@ import numpy as np
 from safetensors.torch import load_file
 from scipy import stats
 
+from lerobot_predvla.sims.libero.env import make_env, official_init_states, task_spec
+from lerobot_predvla.sims.libero.rollout import run_episode
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
 XY = slice(0, 2)  # the OSC position deltas that place the hand over the object
@@ -94,9 +96,6 @@ def load_trace_run(directory: Path) -> TraceRun:
 def expert_approaches(suite: str, task_id: int, states: list[int], cap: int) -> list[dict]:
     """The scripted expert from each official init state (physics only): its summed x, y actions until it closes
     the gripper, that step, and whether it succeeded."""
-    from lerobot_predvla.sims.libero.env import make_env, official_init_states, task_spec
-    from lerobot_predvla.sims.libero.rollout import run_episode
-
     init_states = official_init_states(suite, task_id)
     env = make_env(task_spec(suite, task_id))
     try:
