@@ -77,6 +77,7 @@ def test_traces_are_unnormalised_and_a_correction_that_follows_the_expert_has_sl
         assert summary["axes"][axis]["slope"] == pytest.approx(0.5)
         assert summary["axes"][axis]["r2"] == pytest.approx(1.0)
     assert np.allclose(summary["per_task"]["3"]["correction_mean"], bias + 0.5 * deviations.mean(axis=0))
+    assert np.allclose(summary["per_task"]["3"]["slope"], 0.5) and np.allclose(summary["per_task"]["3"]["r"], 1.0)
 
     report = ec.write_report(tmp_path / "out", [task], {3: expert}, ["predvla er-correction ..."])
     assert (tmp_path / "out" / ec.FIGURE).stat().st_size > 0
