@@ -67,6 +67,17 @@ def test_parameter_count_matches_table_1():
     assert policy.posterior_store is None  # no dataset: the controller only
 
 
+@pytest.mark.parametrize("flush", [True, False])
+def test_a_cpu_policy_flushes_subnormal_floats_unless_asked_not_to(flush):
+    subnormal = torch.tensor([1e-39])
+    torch.set_flush_denormal(False)
+    try:
+        PredVLAPolicy(PredVLAConfig(device="cpu", flush_denormal=flush))
+        assert bool((subnormal * 1.0 == 0).item()) is flush
+    finally:
+        torch.set_flush_denormal(False)
+
+
 def features(vision: int, language: int, state: int, action: int) -> tuple[dict, dict]:
     """Input and output features as `make_policy` passes a dataset's (images and other columns included)."""
     inputs = {

@@ -114,6 +114,8 @@ class PredVLAPolicy(PreTrainedPolicy):
         self.model = PredictiveModel(config)
         if config.recurrence_backend == "auto" and torch.device(config.device).type == "cpu":
             auto_uses_cpp()  # build or load the compiled loops now (once per Python and torch), not at the first tick
+        if config.flush_denormal and torch.device(config.device).type == "cpu":
+            torch.set_flush_denormal(True)  # subnormal weights slow late training on x86 (`flush_denormal`)
         count = sum(p.numel() for p in self.network_parameters())
         paper = f"; Table 1: {PREDVLA_PAPER_PARAMETERS:,}" if has_paper_layout(config) else ""
         logging.info("PredVLA: %s trainable parameters (%s%s)", f"{count:,}", feature_layout(config), paper)
