@@ -6,10 +6,11 @@ import json
 import numpy as np
 import pytest
 import torch
-from safetensors.torch import save_file
 
+from lerobot_predvla import PredVLAConfig
 from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.experiments import er_correction as ec
+from lerobot_predvla.policies.common.processors import make_cached_features_pre_post_processors
 
 LOW = np.array([-1.0, -1.0, -0.6, -0.2, -0.7, -0.3, -1.0])
 HIGH = np.array([1.0, 1.0, 1.0, 0.5, 0.2, 1.0, 1.0])
@@ -19,7 +20,7 @@ def raw_actions(xy: list[tuple[float, float]], close_at: int, steps: int = 12) -
     """A raw action sequence whose x, y are `xy` (cycled) and whose gripper closes from step `close_at`."""
     actions = np.zeros((steps, 7))
     actions[:, :2] = [xy[t % len(xy)] for t in range(steps)]
-    actions[:, ec.GRIPPER] = np.where(np.arange(steps) >= close_at, 1.0, -1.0)
+    actions[:, -1] = np.where(np.arange(steps) >= close_at, 1.0, -1.0)
     return actions
 
 
@@ -36,10 +37,11 @@ def write_trace(directory, checkpoint, episodes: list[np.ndarray], task_id: int 
 
 @pytest.fixture
 def checkpoint(tmp_path):
+    """A checkpoint directory with the postprocessor a PredVLA policy saves (min-max actions)."""
     path = tmp_path / "ckpt"
-    path.mkdir()
-    stats = {f"action.{k}": torch.tensor(v, dtype=torch.float32) for k, v in (("min", LOW), ("max", HIGH))}
-    save_file(stats, str(path / ec.UNNORMALIZER_FILE))
+    stats = {"action": {"min": torch.tensor(LOW, dtype=torch.float32), "max": torch.tensor(HIGH, dtype=torch.float32)}}
+    _, postprocessor = make_cached_features_pre_post_processors(PredVLAConfig(device="cpu"), stats)
+    postprocessor.save_pretrained(path)
     return path
 
 

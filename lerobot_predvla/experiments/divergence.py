@@ -35,11 +35,10 @@ from xml.etree import ElementTree
 import h5py
 import numpy as np
 import torch
-from lerobot.processor import PolicyProcessorPipeline
-from lerobot.processor.converters import policy_action_to_transition, transition_to_policy_action
 
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.language import LanguageEncoder
+from lerobot_predvla.policies.common.processors import load_postprocessor
 from lerobot_predvla.policies.predvla.diagnostics import open_loop
 from lerobot_predvla.policies.predvla.modeling_predvla import PredVLAPolicy
 from lerobot_predvla.sims.libero.env import fixture_poses, make_env, set_fixture_poses, task_spec
@@ -298,9 +297,7 @@ class OpenLoop:
         self.checkpoint = Path(checkpoint)
         self.policy = PredVLAPolicy.from_pretrained(self.checkpoint).eval()
         self.policy.config.er_iterations = 0
-        self.postprocessor = PolicyProcessorPipeline.from_pretrained(
-            self.checkpoint, "policy_postprocessor.json", to_transition=policy_action_to_transition,
-            to_output=transition_to_policy_action)
+        self.postprocessor = load_postprocessor(self.checkpoint)
         self.artefact = FrontendArtefact.load(self.checkpoint / "predvla_frontend")
         self._encoder = None
 

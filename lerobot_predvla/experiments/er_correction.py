@@ -25,16 +25,17 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-from safetensors.torch import load_file
+import torch
 from scipy import stats
 
+from lerobot_predvla.policies.common.processors import load_postprocessor
+from lerobot_predvla.policies.predvla.diagnostics import gripper_events
 from lerobot_predvla.sims.libero.env import make_env, official_init_states, task_spec
 from lerobot_predvla.sims.libero.rollout import run_episode
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
 XY = slice(0, 2)  # the OSC position deltas that place the hand over the object
-GRIPPER = 6  # LIBERO's gripper command: +1 closes
-UNNORMALIZER_FILE = "policy_postprocessor_step_0_unnormalizer_processor.safetensors"
+POSTPROCESSOR_FILE = "policy_postprocessor.json"
 REPORT_JSON, REPORT_MD, FIGURE = "correction.json", "correction.md", "correction.png"
 INTRO = ("Per task and official init state s, summed x, y actions (OSC position deltas; one controller, so the sums "
          "compare as commanded hand displacements): E_s, the scripted expert's until it closes the gripper; R_s, "
@@ -45,9 +46,10 @@ INTRO = ("Per task and official init state s, summed x, y actions (OSC position 
 
 
 def close_step(actions: np.ndarray) -> int | None:
-    """First step whose gripper command closes (> 0), or None if the gripper never closes."""
-    closing = np.flatnonzero(np.asarray(actions)[:, GRIPPER] > 0)
-    return int(closing[0]) if closing.size else None
+    """First step whose gripper command closes (`gripper_events`), or None if the gripper never closes."""
+    steps = len(actions)
+    close = gripper_events(torch.as_tensor(actions)[:, None], torch.ones(steps, 1, dtype=torch.bool))[0, 0]
+    return None if close.isnan() else int(close)
 
 
 def approach(actions: np.ndarray) -> tuple[np.ndarray, int | None]:
@@ -77,7 +79,7 @@ def _arg(eval_args: list[str], name: str) -> str | None:
 
 def load_trace_run(directory: Path) -> TraceRun:
     """Read a trace of one task on the official init states (`--env.init_states=true`, one `--env.task_ids`), and
-    unnormalize its actions with the checkpoint's action statistics (MIN_MAX, LeRobot's unnormalizer)."""
+    turn its actions into raw units with the checkpoint's own postprocessor (as lerobot-eval does)."""
     path = Path(directory) / "trace.json"
     try:
         trace = json.loads(path.read_text())
@@ -89,12 +91,11 @@ def load_trace_run(directory: Path) -> TraceRun:
         raise ValueError(f"{path}: expected a trace of one task (--env.task_ids=[K]) on the official init states "
                          f"(--env.init_states=true); its arguments are {eval_args}.")
     checkpoint = _arg(eval_args, "policy.path")
-    stats_file = Path(checkpoint or "") / UNNORMALIZER_FILE
-    if not stats_file.is_file():
-        raise ValueError(f"{path}: its --policy.path has no {UNNORMALIZER_FILE} ({stats_file}).")
-    tensors = load_file(str(stats_file))
-    low, high = tensors["action.min"].numpy(), tensors["action.max"].numpy()
-    actions = [(np.asarray(e["action"], dtype=np.float64) + 1) / 2 * (high - low) + low for e in episodes]
+    if checkpoint is None or not (Path(checkpoint) / POSTPROCESSOR_FILE).is_file():
+        raise ValueError(f"{path}: its --policy.path ({checkpoint}) has no {POSTPROCESSOR_FILE}.")
+    postprocessor = load_postprocessor(Path(checkpoint))
+    with torch.no_grad():
+        actions = [postprocessor(torch.tensor(e["action"])).double().numpy() for e in episodes]
     iterations = _arg(eval_args, "policy.er_iterations")
     return TraceRun(Path(directory), int(task_ids[0]), checkpoint, iterations == "0", actions, eval_args)
 

@@ -3,10 +3,12 @@
 Each policy folder's `processor_<type>.py` gives LeRobot its `make_<type>_pre_post_processors` from this one.
 """
 
+from pathlib import Path
 from typing import Any
 
 import torch
 from lerobot.processor import PolicyAction, PolicyProcessorPipeline
+from lerobot.processor.converters import policy_action_to_transition, transition_to_policy_action
 from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
 
 from lerobot_predvla.columns import OBS_VISION_FEATURES
@@ -62,3 +64,10 @@ def make_cached_features_pre_post_processors(
         input_steps=[s.rename_observations, s.add_batch_dim, s.to_device, frontend_step(config), s.normalize],
         output_steps=[s.unnormalize, s.to_cpu],
     )
+
+
+def load_postprocessor(checkpoint: Path) -> PolicyProcessorPipeline[PolicyAction, PolicyAction]:
+    """A checkpoint's saved output pipeline (`policy_postprocessor.json`): model actions in, raw actions out."""
+    return PolicyProcessorPipeline.from_pretrained(
+        checkpoint, "policy_postprocessor.json", to_transition=policy_action_to_transition,
+        to_output=transition_to_policy_action)
