@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from lerobot_predvla.experiments.er_correction import (
+    REPORT_MD,
     TraceRun,
     expert_approaches,
     load_trace_run,
@@ -71,5 +72,5 @@ def run(args: argparse.Namespace) -> int:
     commands = [_trace_command(r) for r in [*ers, *open_loops.values()]]
     commands.append("predvla " + shlex.join(sys.argv[1:]))
     write_report(args.out, tasks, expert, commands)
-    print((args.out / "correction.md").read_text())
+    print((args.out / REPORT_MD).read_text())
     return 0
