@@ -53,9 +53,9 @@ class PredVLAConfig(CachedFeaturesConfig):
             present, else the Python loops; "cpp": the compiled loops or an error; "python": ATen ops on any device
             and dtype (docs/speed.md).
         flush_denormal: On a CPU, the policy sets `torch.set_flush_denormal(True)` for its process (default True),
-            not a paper setting: values below 1.2e-38 become zero. Trained weights hold a few such values, where x86
-            arithmetic is slow; a training step with them kept took 1.09-1.15x as long (docs/speed.md, "Subnormal
-            floats"). Nothing above 1.2e-38 changes.
+            not a paper setting: values below 1.2e-38 become zero. Late in training weights and matmul outputs hold
+            such values, where x86 arithmetic is slow: at step 8,000 of a full-scale run a training step with them
+            kept took 1.79x as long (docs/speed.md, "Subnormal floats"). Nothing above 1.2e-38 changes.
         grad_clip_norm: Norm at which lerobot-train clips the network's gradient before Adam (default 100). Table 2
             enables clipping without a value; 100 catches spikes only, where a clip that binds at every step lets
             weight decay erase the priors' maps (docs/paper.md, "Choices the paper leaves open").
