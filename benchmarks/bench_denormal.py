@@ -26,6 +26,7 @@ from pathlib import Path
 import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
 from lerobot.policies import make_policy
+from lerobot.utils.constants import TRAINING_STATE_DIR
 from safetensors.torch import load_file
 from torch import Tensor
 from torch.utils._python_dispatch import TorchDispatchMode
@@ -85,7 +86,7 @@ def synthetic_step(checkpoint: Path) -> tuple[Callable[[], float], dict]:
 
 def dataset_step(checkpoint: Path, dataset_root: Path, batch: int) -> tuple[Callable[[], None], dict]:
     """Forward and backward of the resumed policy on `batch` of its own training episodes (no optimizer step)."""
-    if not (checkpoint.parent / "training_state").is_dir():
+    if not (checkpoint.parent / TRAINING_STATE_DIR).is_dir():
         raise SystemExit(f"--checkpoint {checkpoint}: not a training checkpoint (no ../training_state beside it); "
                          "--dataset-root needs the posterior store that lerobot-train saves there.")
     config = PredVLAConfig.from_pretrained(checkpoint, cli_overrides=["--flush_denormal=false"])

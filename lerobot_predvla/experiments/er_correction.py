@@ -28,14 +28,13 @@ import numpy as np
 import torch
 from scipy import stats
 
-from lerobot_predvla.policies.common.processors import load_postprocessor
+from lerobot_predvla.policies.common.processors import POSTPROCESSOR_FILE, load_postprocessor
 from lerobot_predvla.policies.predvla.diagnostics import gripper_events
 from lerobot_predvla.sims.libero.env import make_env, official_init_states, task_spec
 from lerobot_predvla.sims.libero.rollout import run_episode
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
 XY = slice(0, 2)  # the OSC position deltas that place the hand over the object
-POSTPROCESSOR_FILE = "policy_postprocessor.json"
 REPORT_JSON, REPORT_MD, FIGURE = "correction.json", "correction.md", "correction.png"
 INTRO = ("Per task and official init state s, summed x, y actions (OSC position deltas; one controller, so the sums "
          "compare as commanded hand displacements): E_s, the scripted expert's until it closes the gripper; R_s, "
