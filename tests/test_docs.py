@@ -20,6 +20,7 @@ from lerobot_predvla.experiments.headline import (
     row_numbers,
     update_docs,
 )
+from lerobot_predvla.experiments.report.results import ReportError
 from lerobot_predvla.hub.upload import shipped_checkpoints, without_machine_paths
 from lerobot_predvla.utils.io import atomic_write_json
 
@@ -117,6 +118,41 @@ def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
     assert "| 70.0 ± 10.0 (n = 3) | 76.0 (n = 1) | — | 98.0 (n = 1) |" in _block(tmp_path / README)
     assert "the better BC baseline is ahead of it in 2 of the 2 rows where one was trained" in _block(
         tmp_path / README)
+
+
+def test_a_row_without_baselines_shows_those_of_the_row_with_its_demonstrations(tmp_path):
+    """The full-scale reading trains no BC baseline: its row leads and shows Table 2's B1 and B2, which trained on
+    the same dataset; a sweep file that made another dataset is refused, naming the file and the key."""
+    shutil.copytree(REPO / "configs", tmp_path / "configs")
+    table2 = Path("results/libero_object_table2")
+    shutil.copytree(REPO / table2 / "runs/records", tmp_path / table2 / "runs/records")
+    shutil.copy(REPO / table2 / "report.json", tmp_path / table2 / "report.json")
+    reading = tmp_path / "results/libero_object_reading"
+    runs = {("predvla_reading", 0): 430, ("predvla_reading_open_loop", 0): 410}
+    configs = {}
+    for (config, seed), successes in runs.items():
+        atomic_write_json(reading / f"runs/records/{config}/libero_object/seed{seed}.json",
+                          _record(config, seed, successes))
+        configs[config] = {"suites": {"libero_object": {"seeds": {str(seed): successes / 5}}}}
+    atomic_write_json(reading / "report.json", {"configs": configs})
+    (tmp_path / "docs").mkdir()
+    for name in (README, RESULTS_DOC):
+        (tmp_path / name).write_text(f"intro\n{HEADLINE_START}\n{HEADLINE_END}\nend\n")
+    update_docs(tmp_path)
+    baselines = json.loads((REPO / table2 / "report.json").read_text())["configs"]
+    rnn, transformer = (baselines[name]["suites"]["libero_object"]["mean"] for name in ("B2", "B1"))
+    rows = [line for line in _block(tmp_path / README).splitlines() if re.match(r"\| \d+\. \[", line)]
+    assert "results/libero_object_reading/report.md" in rows[0] and "results/libero_object_table2/report.md" in rows[1]
+    assert f"| 86.0 (n = 1) | 82.0 (n = 1) | {rnn:.1f} (n = 1) | {transformer:.1f} (n = 1) |" in rows[0]
+    assert "BC baselines: [Table 2's](results/libero_object_table2/report.md)" in rows[0]
+    sweeps = tmp_path / "configs/sweeps"
+    base = (sweeps / "libero_object_table2.yaml").read_text()
+    (sweeps / "other_data.yaml").write_text(base.replace("per_task: 50", "per_task: 20"))
+    reading_sweep = sweeps / "libero_object_reading_full.yaml"
+    reading_sweep.write_text(reading_sweep.read_text().replace("extends: libero_object_table2.yaml",
+                                                               "extends: other_data.yaml"))
+    with pytest.raises(ReportError, match=r"libero_object_reading_full.yaml: `data.libero_object` differs"):
+        update_docs(tmp_path)
 
 
 def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys):

@@ -60,7 +60,9 @@ EVERY_ROW = [("benchmark", Departure("libero_object only", "the paper: four suit
 
 @dataclass(frozen=True)
 class Experiment:
-    """One headline row: a results directory and the configuration of each column (None: not run there)."""
+    """One headline row: a results directory and the configuration of each column (None: not run there).
+    `baselines_from`: another row whose BC columns this row shows, trained on the same demonstrations (the same
+    `data` and `datasets` of its sweep file, checked), when this row's sweep trains no baseline of its own."""
 
     results: str
     sweep: str
@@ -69,11 +71,15 @@ class Experiment:
     open_loop: str
     bc_rnn: str | None = None
     bc_transformer: str | None = None
+    baselines_from: "Experiment | None" = None
 
 
+TABLE2 = Experiment("libero_object_table2", "configs/sweeps/libero_object_table2.yaml", "Table 2",
+                    "predvla_table2", "predvla_table2_open_loop", "B2", "B1")
 EXPERIMENTS = (
-    Experiment("libero_object_table2", "configs/sweeps/libero_object_table2.yaml", "Table 2",
-               "predvla_table2", "predvla_table2_open_loop", "B2", "B1"),
+    Experiment("libero_object_reading", "configs/sweeps/libero_object_reading_full.yaml", "fit_sensory_olt",
+               "predvla_reading", "predvla_reading_open_loop", baselines_from=TABLE2),
+    TABLE2,
     Experiment("libero_object_cpu", "configs/sweeps/libero_object_cpu.yaml", "CPU recipe",
                "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1"),
     Experiment("libero_object_cpu_init_noise", "configs/sweeps/libero_object_cpu_init_noise.yaml", "CPU recipe",
@@ -206,19 +212,44 @@ def _protocol(cells: dict[str, Cell]) -> list[tuple[str, Departure]]:
     return departures
 
 
+def _load_sweep(root: Path, exp: Experiment) -> Sweep:
+    try:
+        return Sweep.load(Path(root) / exp.sweep)
+    except SweepError as err:
+        raise ReportError(str(err)) from err
+
+
+def _summary(results_dir: Path) -> dict | None:
+    path = results_dir / SUMMARY_FILE
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _baseline_cells(root: Path, exp: Experiment, sweep: Sweep) -> dict[str, Cell]:
+    """The BC columns of `exp.baselines_from`'s results, after checking that its sweep made the same dataset."""
+    source = exp.baselines_from
+    other = _load_sweep(root, source)
+    for key in ("data", "datasets"):
+        mine, theirs = getattr(sweep.settings, key).get(SUITE), getattr(other.settings, key).get(SUITE)
+        if mine != theirs:
+            raise ReportError(f"{exp.sweep}: `{key}.{SUITE}` differs from {source.sweep}'s, whose BC baselines the "
+                              f"headline row of results/{exp.results} shows: {mine} against {theirs}.")
+    results_dir = Path(root) / "results" / source.results
+    summary = _summary(results_dir) or {"configs": {}}
+    return {key: _cell(results_dir, summary, getattr(source, key)) for key in BASELINE_COLUMNS}
+
+
 def build_rows(root: Path) -> list[Row]:
     """Every row of EXPERIMENTS whose report.json exists under `root/results/`."""
     rows = []
     for exp in EXPERIMENTS:
         results_dir = Path(root) / "results" / exp.results
-        if not (results_dir / SUMMARY_FILE).is_file():
+        summary = _summary(results_dir)
+        if summary is None:
             continue
-        summary = json.loads((results_dir / SUMMARY_FILE).read_text())
-        try:
-            sweep = Sweep.load(Path(root) / exp.sweep)
-        except SweepError as err:
-            raise ReportError(str(err)) from err
+        sweep = _load_sweep(root, exp)
         cells = {key: _cell(results_dir, summary, getattr(exp, key)) for key, _ in COLUMNS}
+        if exp.baselines_from:
+            cells.update(_baseline_cells(root, exp, sweep))
         if not cells["error_regression"].n:
             continue
         demonstrations, data_departures = _demonstrations(sweep)
@@ -238,9 +269,11 @@ def _paper_cell(key: str) -> str:
 
 def row_label(row: Row, prefix: str) -> str:
     """`prefix`: the path from the document to the repository root ("" for README.md, "../" for docs/)."""
-    link = f"{prefix}results/{row.experiment.results}/report.md"
-    return (f"{row.number}. [{row.experiment.recipe}]({prefix}docs/glossary.md#recipes); {row.demonstrations} "
-            f"([report]({link}))")
+    exp = row.experiment
+    baselines = (f"; BC baselines: [{exp.baselines_from.recipe}'s]({prefix}results/{exp.baselines_from.results}/"
+                 "report.md), the same demonstrations" if exp.baselines_from else "")
+    return (f"{row.number}. [{exp.recipe}]({prefix}docs/glossary.md#recipes); {row.demonstrations} "
+            f"([report]({prefix}results/{exp.results}/report.md){baselines})")
 
 
 def summary_table(rows: list[Row], prefix: str, blind: dict | None = None) -> str:
