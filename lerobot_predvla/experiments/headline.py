@@ -25,7 +25,7 @@ from pathlib import Path
 
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.experiments.formatting import MISSING, fmt_mean_std, fmt_rate, table
-from lerobot_predvla.experiments.report.results import SUMMARY_FILE, ReportError, run_episodes
+from lerobot_predvla.experiments.report.results import SUMMARY_FILE, ReportError, load_summary, run_episodes
 from lerobot_predvla.experiments.sweep.spec import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
 from lerobot_predvla.hub.upload import repository_files, shipped_checkpoints
 from lerobot_predvla.policies.recipe import Departure, config_departures
@@ -220,8 +220,7 @@ def _load_sweep(root: Path, exp: Experiment) -> Sweep:
 
 
 def _summary(results_dir: Path) -> dict | None:
-    path = results_dir / SUMMARY_FILE
-    return json.loads(path.read_text()) if path.is_file() else None
+    return load_summary(results_dir) if (results_dir / SUMMARY_FILE).is_file() else None
 
 
 def _baseline_cells(root: Path, exp: Experiment, sweep: Sweep) -> dict[str, Cell]:
