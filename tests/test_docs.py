@@ -64,9 +64,9 @@ def test_departures_are_one_table_of_the_rows_they_apply_to():
     readme, results = _block(REPO / README), _block(REPO / RESULTS_DOC)
     assert "| benchmark | libero_object only | all |" in readme and "(the paper:" not in readme
     assert "| benchmark | libero_object only | the paper: four suites | all |" in results
-    assert "| step cap | 280 | the paper: 600 | 2-6 |" in results
-    assert "|  | lambda_q = 100 | Table 2: 1 | 5, 6 |" in results
-    assert readme.count("| 1. [Table 2]") == 1
+    assert "| step cap | 280 | the paper: 600 | 3-7 |" in results
+    assert "|  | lambda_q = 100 | Table 2: 1 | 6, 7 |" in results
+    assert readme.count("| 2. [Table 2]") == 1 and readme.count("| 1. [fit_sensory_olt]") == 1
     assert [row_numbers(n, 6) for n in ([1, 5], [2, 3, 4, 6], [2, 3], list(range(1, 7)))] == [
         "1, 5", "2-4, 6", "2, 3", "all"]
 
@@ -397,6 +397,22 @@ def test_model_card_states_the_checkpoints_own_training_and_results():
     for record in records:  # every evaluation, with its own totals and protocol
         assert f"`{record['config']}` |" in card and f"{record['successes']}/{record['episodes']}" in card
     assert "No evaluation results" not in card
+
+
+def test_a_published_copy_of_a_resumed_training_carries_its_evaluations():
+    """`checkpoints/predvla_libero_object_reading` is `predvla push --out` of a training that resumed from a
+    checkpoint (its record's training command names no job): the card finds its evaluations by the weights' SHA-256,
+    and a copy with other weights finds none of them."""
+    from lerobot_predvla.hub.card import evaluation_records
+
+    checkpoint = REPO / "checkpoints/predvla_libero_object_reading"
+    configs = {r["config"] for r in evaluation_records(checkpoint, REPO / "results")}
+    assert {"predvla_reading", "predvla_reading_open_loop"} <= configs
+    card = (checkpoint / "README.md").read_text()
+    assert "batch size 16 per process, 2 processes (32 per step)" in card and "387/500" in card
+
+    other = REPO / "checkpoints/predvla_libero_object"
+    assert not configs & {r["config"] for r in evaluation_records(other, REPO / "results")}
 
 
 def test_model_card_command_reproduces_its_results_and_limitations_state_them():

@@ -1,5 +1,5 @@
-"""The committed libero_object suite checkpoint loads through LeRobot's own `make_policy` path and acts on a real
-LIBERO observation (the quickstart's `lerobot-eval --policy.path=checkpoints/predvla_libero_object`)."""
+"""The quickstart's libero_object suite checkpoint loads through LeRobot's own `make_policy` path and acts on a real
+LIBERO observation (`lerobot-eval --policy.path=checkpoints/predvla_libero_object_reading`)."""
 
 from pathlib import Path
 
@@ -9,7 +9,7 @@ import torch
 
 pytestmark = pytest.mark.simulator
 
-CHECKPOINT = Path(__file__).parents[1] / "checkpoints" / "predvla_libero_object"
+CHECKPOINT = Path(__file__).parents[1] / "checkpoints" / "predvla_libero_object_reading"
 
 
 def test_suite_checkpoint_loads_with_make_policy_and_acts_on_libero():

@@ -30,6 +30,7 @@ from lerobot_predvla.sims.libero.protocol import (
     PAPER_EPISODES_PER_TASK,
     PAPER_OBJECT,
 )
+from lerobot_predvla.utils.manifest import sha256_file
 from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.versions import package_version
 
@@ -210,11 +211,14 @@ def training_processes(command: list[str]) -> int:
 
 def evaluation_records(checkpoint: Path, results_root: Path) -> list[dict]:
     """The `predvla sweep` run records under `results_root/*/runs/records/` that evaluated `checkpoint`: those whose
-    `checkpoint` is this directory, and those whose training (job name, dataset and seed) is the one its
-    `train_config.json` records (a checkpoint copied out of a sweep's runs directory)."""
+    `checkpoint` is this directory, those whose training (job name, dataset and seed) is the one its
+    `train_config.json` records (a checkpoint copied out of a sweep's runs directory), and those that evaluated its
+    weights (`model_sha256`: a published copy, e.g. `predvla push --out`, of a resumed training)."""
     checkpoint = Path(checkpoint).resolve()
     train_cfg_path = checkpoint / "train_config.json"
     train_cfg = json.loads(train_cfg_path.read_text()) if train_cfg_path.is_file() else {}
+    weights = checkpoint / "model.safetensors"
+    weights_sha256 = sha256_file(weights) if weights.is_file() else None
     found = []
     for path in sorted(Path(results_root).glob("*/runs/records/*/*/seed*.json")):
         record = json.loads(path.read_text())
@@ -226,7 +230,8 @@ def evaluation_records(checkpoint: Path, results_root: Path) -> list[dict]:
             _flag(train, "--job_name") == train_cfg.get("job_name")
             and _flag(train, "--dataset.repo_id") == train_cfg.get("dataset", {}).get("repo_id")
             and int(record["seed"]) == train_cfg.get("seed"))
-        if same_dir or same_training:
+        same_weights = weights_sha256 is not None and record.get("model_sha256") == weights_sha256
+        if same_dir or same_training or same_weights:
             found.append({**record, "results": str(runs_dir.parent.relative_to(Path(results_root).parent))})
     return found
 
