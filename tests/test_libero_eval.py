@@ -5,6 +5,7 @@ The checkpoint is trained for two steps on a converted dataset whose front end w
 """
 
 import json
+import os
 import subprocess
 from pathlib import Path
 
@@ -88,6 +89,7 @@ def test_predvla_trace_records_error_regression_in_the_simulator(checkpoint, tmp
     run([predvla, "trace", str(tmp_path / "er"), *eval_args])
     trace = json.loads((tmp_path / "er" / "trace.json").read_text())
     assert len(trace["episodes"]) == 2 and (tmp_path / "er" / "eval" / "eval_info.json").is_file()
+    assert trace["omp_num_threads"] == os.environ.get("OMP_NUM_THREADS")
     for episode in trace["episodes"]:
         assert episode["steps"] == list(range(1, EPISODE_STEPS + 1))
         assert np.isfinite(episode["action"]).all() and np.shape(episode["action"]) == (EPISODE_STEPS, 7)

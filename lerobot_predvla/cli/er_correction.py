@@ -19,7 +19,6 @@ from pathlib import Path
 
 from lerobot_predvla.experiments.er_correction import (
     REPORT_MD,
-    TraceRun,
     expert_approaches,
     load_trace_run,
     task_correction,
@@ -39,11 +38,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--cap", type=int, default=PAPER_EPISODE_LENGTH, help="the expert's step cap")
     p.add_argument("--out", type=Path, required=True, help="directory for correction.json/.md/.png")
     p.set_defaults(func=run)
-
-
-def _trace_command(run: TraceRun) -> str:
-    kept = [a for a in run.eval_args if not a.startswith("--output_dir=")]
-    return f"predvla trace {run.path} {shlex.join(kept)}"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -69,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         print(f"predvla er-correction: error: {err}", file=sys.stderr)
         return 2
-    commands = [_trace_command(r) for r in [*ers, *open_loops.values()]]
+    commands = [r.command() for r in [*ers, *open_loops.values()]]
     commands.append("predvla " + shlex.join(sys.argv[1:]))
     write_report(args.out, tasks, expert, commands)
     print((args.out / REPORT_MD).read_text())

@@ -21,6 +21,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.cli.mechanism",
     "lerobot_predvla.cli.trace",
     "lerobot_predvla.cli.er_correction",
+    "lerobot_predvla.cli.er_timing",
     "lerobot_predvla.cli.divergence",
     "lerobot_predvla.cli.oracle_probe",
     "lerobot_predvla.cli.sweep",

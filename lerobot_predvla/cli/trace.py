@@ -1,11 +1,12 @@
 """`predvla trace`: `lerobot-eval` of a PredVLA checkpoint with error regression traced step by step.
 
 Every argument after OUT goes to lerobot-eval unchanged (its `--output_dir` defaults to OUT/eval). Writes
-OUT/trace.json (the lerobot-eval arguments and, per episode in lerobot-eval's order, per control step: the
-action, the prior chain's action and how far error regression moved each module's posteriors) and OUT/trace.png
-(episode --episode of this run, beside the same episode of every --compare trace). lerobot-eval steps every
-environment of a batch until the last one ends, so an episode's trace runs past its own end; eval_info.json in the
-output directory says which episodes succeeded. Example (seed 1 against seed 0 of the same recipe, one reset):
+OUT/trace.json (the lerobot-eval arguments, OMP_NUM_THREADS as set or null, and, per episode in lerobot-eval's
+order, per control step: the action, the prior chain's action and how far error regression moved each module's
+posteriors) and OUT/trace.png (episode --episode of this run, beside the same episode of every --compare trace).
+lerobot-eval steps every environment of a batch until the last one ends, so an episode's trace runs past its own
+end; eval_info.json in the output directory says which episodes succeeded. Example (seed 1 against seed 0 of
+the same recipe, one reset):
 
   predvla trace outputs/trace_seed0 --policy.path=checkpoints/predvla_libero_object_lambda_q100 \\
     --policy.device=cpu --env.type=predvla_libero --env.task=libero_object '--env.task_ids=[7]' \\
@@ -16,6 +17,7 @@ output directory says which episodes succeeded. Example (seed 1 against seed 0 o
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -82,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
         print("predvla trace: error: no step of error regression was recorded; is --policy.path a PredVLA "
               "checkpoint?", file=sys.stderr)
         return 2
-    trace = {"eval_args": eval_args, "episodes": episodes}
+    # the thread count is part of the run: error regression's outcomes can turn on how its sums are rounded
+    trace = {"eval_args": eval_args, "omp_num_threads": os.environ.get("OMP_NUM_THREADS"), "episodes": episodes}
     args.out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(args.out / TRACE_FILE, trace)
     if args.episode >= len(episodes):

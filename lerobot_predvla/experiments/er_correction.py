@@ -21,6 +21,7 @@ whose spread is small is a bias shared by every start, which no observation expl
 
 import json
 import re
+import shlex
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -67,6 +68,18 @@ class TraceRun:
     open_loop: bool
     actions: list[np.ndarray]
     eval_args: list[str]
+    omp_num_threads: str | None = None  # as the trace ran (None: not set, or a trace that predates the field)
+
+    @property
+    def output_dir(self) -> Path:
+        """lerobot-eval's output directory of the trace (its eval_info.json)."""
+        return Path(_arg(self.eval_args, "output_dir") or self.path / "eval")
+
+    def command(self) -> str:
+        """The `predvla trace` command that made this directory (its output directory left to the default)."""
+        kept = [a for a in self.eval_args if not a.startswith("--output_dir=")]
+        threads = f"OMP_NUM_THREADS={self.omp_num_threads} " if self.omp_num_threads is not None else ""
+        return f"{threads}predvla trace {self.path} {shlex.join(kept)}"
 
 
 def _arg(eval_args: list[str], name: str) -> str | None:
@@ -96,7 +109,8 @@ def load_trace_run(directory: Path) -> TraceRun:
     with torch.no_grad():
         actions = [postprocessor(torch.tensor(e["action"])).double().numpy() for e in episodes]
     iterations = _arg(eval_args, "policy.er_iterations")
-    return TraceRun(Path(directory), int(task_ids[0]), checkpoint, iterations == "0", actions, eval_args)
+    return TraceRun(Path(directory), int(task_ids[0]), checkpoint, iterations == "0", actions, eval_args,
+                    trace.get("omp_num_threads"))
 
 
 def expert_approaches(suite: str, task_id: int, states: list[int], cap: int) -> list[dict]:
