@@ -119,7 +119,8 @@ def figure(er: TraceRun, open_loop: np.ndarray, episodes: list[EpisodeTiming], o
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
     window = slice(max(open_loop_lift - 15, 0), open_loop_lift + 10)
-    for actions, e in zip(er.actions, episodes, strict=True):
+    drawn = sorted(zip(er.actions, episodes, strict=True), key=lambda pair: not pair[1].success)  # failures on top
+    for actions, e in drawn:
         steps = np.arange(len(actions))[window]
         left.plot(steps, actions[window, Z], color="tab:green" if e.success else "tab:red", lw=0.7, alpha=0.6)
     left.plot(np.arange(len(open_loop))[window], open_loop[window, Z], color="black", lw=2, label="exact open loop")
