@@ -3,6 +3,7 @@ run `eval.workers` at once, each finished part kept when a run is redone; the ru
 `eval_info.json`."""
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -23,8 +24,9 @@ from lerobot_predvla.utils.versions import machine, package_versions
 
 
 def versions() -> dict[str, str]:
-    """Package versions, the plugin's git commit when it runs from a checkout, and the machine."""
-    found = {**package_versions(), "machine": machine()}
+    """Package versions, the plugin's git commit when it runs from a checkout, the machine, and OMP_NUM_THREADS (a
+    different thread count rounds error regression's sums differently, which can change an episode's outcome)."""
+    found = {**package_versions(), "machine": machine(), "omp_num_threads": os.environ.get("OMP_NUM_THREADS", "unset")}
     try:
         commit = subprocess.run(
             ["git", "rev-parse", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent, check=False
