@@ -14,7 +14,6 @@ The outcomes come from the trace's own evaluation or from a full evaluation of t
 episodes step for step up to its own cap, so a shorter trace can time the phases of a longer evaluation.
 """
 
-import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -22,6 +21,7 @@ import numpy as np
 from scipy import stats
 
 from lerobot_predvla.experiments.er_correction import TraceRun, close_step
+from lerobot_predvla.experiments.eval_info import episode_successes
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
 Z = 2  # the OSC z position delta
@@ -47,15 +47,10 @@ class EpisodeTiming:
 
 def episode_outcomes(eval_info: Path, task_id: int) -> list[bool]:
     """Per episode of task `task_id`, in lerobot-eval's order, whether it succeeded (an eval_info.json)."""
-    try:
-        info = json.loads(Path(eval_info).read_text())
-        rows = [t for t in info["per_task"] if int(t["task_id"]) == task_id]
-        if len(rows) != 1:
-            raise ValueError(f"{len(rows)} entries of task {task_id} in per_task")
-        return [bool(s) for s in rows[0]["metrics"]["successes"]]
-    except (OSError, ValueError, KeyError, TypeError) as err:
-        raise ValueError(f"{eval_info}: expected lerobot-eval's eval_info.json with the successes of task "
-                         f"{task_id} ({err}).") from err
+    successes = episode_successes(eval_info)
+    if str(task_id) not in successes:
+        raise ValueError(f"{eval_info}: no successes of task {task_id} (it has tasks {list(successes)}).")
+    return successes[str(task_id)]
 
 
 def episode_timings(er: TraceRun, successes: list[bool]) -> list[EpisodeTiming]:
