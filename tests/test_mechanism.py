@@ -14,10 +14,12 @@ and acts through `select_action`. What holds, and what the tests assert (docs/re
 """
 
 import argparse
+import json
 
 import pytest
 import torch
 
+from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.cli.mechanism import reading
 from lerobot_predvla.experiments.mechanism import (
     ReachTask,
@@ -102,3 +104,16 @@ def test_a_reading_names_its_fields_and_keeps_the_commas_of_a_list():
     assert reading("table2:") == ("table2", {}) and reading("gd:er_optimizer=gd") == ("gd", {"er_optimizer": "gd"})
     with pytest.raises(argparse.ArgumentTypeError, match="expected name:field=value"):
         reading("bad:er_lr")
+
+
+def test_the_command_records_where_its_numbers_were_made(tmp_path):
+    """Training's arithmetic differs between installations, so `--out` keeps the versions, commit and machine beside
+    every row, with the training seed."""
+    out = tmp_path / "mechanism.json"
+    assert predvla_main(["mechanism", "--steps", "2", "--episodes-per-target", "1", "--seed", "3",
+                         "--out", str(out)]) == 0
+    record = json.loads(out.read_text())
+    assert record["seed"] == 3 and record["steps"] == 2
+    recorded = set(record["versions"])
+    assert {"python", "torch", "lerobot", "machine", "omp_num_threads", "lerobot_predvla_git"} <= recorded
+    assert [row["inference"] for row in record["rows"]] == ["open_loop", "table2_er"]

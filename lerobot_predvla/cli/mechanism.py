@@ -25,6 +25,7 @@ from lerobot_predvla.experiments.mechanism import (
 )
 from lerobot_predvla.policies.predvla.configuration_predvla import MODULE_NAMES
 from lerobot_predvla.utils.io import atomic_write_json
+from lerobot_predvla.utils.versions import run_versions
 
 
 def reading(text: str) -> tuple[str, dict]:
@@ -80,5 +81,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{outcome.visual_error:.3f}  follows swapped {follows}", flush=True)
     print(f"chance: {1 / task.num_targets:.2f} (open loop can reach at most one of {task.num_targets} targets)")
     if args.out is not None:
-        atomic_write_json(args.out, {"task": vars(task), "steps": args.steps, "rows": rows})
+        # Training's arithmetic, and so every row, can differ between installations: the file says which made it.
+        atomic_write_json(args.out, {"task": vars(task), "steps": args.steps, "seed": args.seed,
+                                     "versions": run_versions(), "rows": rows})
     return 0

@@ -3,6 +3,7 @@
 import importlib.metadata
 import os
 import platform
+import subprocess
 import sys
 from pathlib import Path
 
@@ -36,3 +37,18 @@ def machine(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
             if model and flags:
                 break
     return f"{model}, {os.cpu_count()} logical CPUs, AVX-512 bf16: {'yes' if 'avx512_bf16' in flags else 'no'}"
+
+
+def run_versions() -> dict[str, str]:
+    """What a result file records of where it was made: package versions, the plugin's git commit when it runs from
+    a checkout, the machine, and OMP_NUM_THREADS (a different thread count rounds error regression's sums
+    differently, which can change an episode's outcome)."""
+    found = {**package_versions(), "machine": machine(), "omp_num_threads": os.environ.get("OMP_NUM_THREADS", "unset")}
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent, check=False
+        ).stdout.strip()
+        found["lerobot_predvla_git"] = commit or "unknown"
+    except OSError:
+        found["lerobot_predvla_git"] = "unknown"
+    return found

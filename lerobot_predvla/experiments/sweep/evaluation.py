@@ -3,9 +3,7 @@ run `eval.workers` at once, each finished part kept when a run is redone; the ru
 `eval_info.json`."""
 
 import json
-import os
 import shutil
-import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -20,21 +18,7 @@ from lerobot_predvla.experiments.sweep.workspace import Workspace
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.manifest import sha256_file
 from lerobot_predvla.utils.statistics import episode_totals, percent
-from lerobot_predvla.utils.versions import machine, package_versions
-
-
-def versions() -> dict[str, str]:
-    """Package versions, the plugin's git commit when it runs from a checkout, the machine, and OMP_NUM_THREADS (a
-    different thread count rounds error regression's sums differently, which can change an episode's outcome)."""
-    found = {**package_versions(), "machine": machine(), "omp_num_threads": os.environ.get("OMP_NUM_THREADS", "unset")}
-    try:
-        commit = subprocess.run(
-            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent, check=False
-        ).stdout.strip()
-        found["lerobot_predvla_git"] = commit or "unknown"
-    except OSError:
-        found["lerobot_predvla_git"] = "unknown"
-    return found
+from lerobot_predvla.utils.versions import run_versions
 
 
 class Evaluation(Workspace):
@@ -165,7 +149,7 @@ class Evaluation(Workspace):
             # the weights evaluated: a training redone in place leaves the path, not this (report.paired.same_model)
             "model_sha256": sha256_file(self.trained_checkpoint(trained) / "model.safetensors"),
             "commands": {"train": trained["command"], "eval": command},
-            "versions": versions(),
+            "versions": run_versions(),
             "finished": datetime.now(UTC).isoformat(timespec="seconds"),
         }
         atomic_write_json(self.record_path(run), record)
