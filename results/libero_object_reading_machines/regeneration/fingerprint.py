@@ -3,18 +3,18 @@
 Usage: python fingerprint.py HDF5_SUITE_DIR > fingerprint.json
 
 Per file and demonstration: the first 16 hex digits of the sha256 of its actions, simulator states and each camera's
-images, with the machine's CPU and the simulator's version.
+images, with where it was made (`lerobot_predvla.utils.versions.run_versions`, plus the simulator's version).
 """
 
 import hashlib
 import json
-import platform
 import sys
 from pathlib import Path
 
 import h5py
-import mujoco
 import numpy as np
+
+from lerobot_predvla.utils.versions import package_version, run_versions
 
 KEYS = ("actions", "states", "obs/agentview_rgb", "obs/eye_in_hand_rgb")
 
@@ -23,19 +23,13 @@ def digest(array: np.ndarray) -> str:
     return hashlib.sha256(array.tobytes()).hexdigest()[:16]
 
 
-def cpu_field(name: str) -> str:
-    return next(line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith(name))
-
-
 def fingerprint(root: Path) -> dict:
     files = {}
     for path in sorted(root.glob("*.hdf5")):
         with h5py.File(path, "r") as f:
             demos = sorted(f["data"], key=lambda name: int(name.split("_")[1]))
             files[path.name] = {d: {k: digest(f[f"data/{d}/{k}"][()]) for k in KEYS} for d in demos}
-    machine = {"cpu": cpu_field("model name"), "avx512": sorted(x for x in cpu_field("flags").split() if "avx512" in x),
-               "mujoco": mujoco.__version__, "python": platform.python_version()}
-    return {"machine": machine, "files": files}
+    return {"versions": {**run_versions(), "mujoco": package_version("mujoco")}, "files": files}
 
 
 if __name__ == "__main__":
