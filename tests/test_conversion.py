@@ -14,6 +14,7 @@ from libero_factory import RAW_TOP_ROWS, run_cli, write_libero_file
 
 from lerobot_predvla.columns import HDF5_CAMERAS, OBS_LANGUAGE_FEATURES, OBS_VISION_FEATURES
 from lerobot_predvla.data import conversion
+from lerobot_predvla.data.features_only import features_only_copy
 from lerobot_predvla.data.libero_hdf5 import LiberoDataError, scan_file
 from lerobot_predvla.frontend import FrontendArtefact, FrozenFrontend
 from lerobot_predvla.frontend.preprocessing import libero_hdf5_to_lerobot
@@ -312,3 +313,21 @@ def test_existing_output_is_not_touched(libero, frontend_dir, tmp_path, capsys):
 def test_artefact_travels_with_dataset(png_dataset, frontend_dir):
     copy = FrontendArtefact.load(png_dataset.root / conversion.FRONTEND_META_DIR)
     assert copy.metadata() == FrontendArtefact.load(frontend_dir).metadata()
+
+
+def test_conversion_without_frames_is_the_features_only_copy(png_dataset, libero, frontend_dir, tmp_path):
+    """`--image-storage none` writes what `predvla features-only` keeps of a converted dataset (every column
+    but the cameras, value for value), and the front-end artefact, without the cameras."""
+    out = tmp_path / "features"
+    assert convert(libero[0], frontend_dir, out, "--image-storage", "none", "--repo-id", "local/obj") == 0
+    direct = LeRobotDataset("local/obj", root=out)
+    copy = features_only_copy(png_dataset.root, tmp_path / "copy", repo_id="local/obj")
+    assert not direct.meta.camera_keys and set(direct.meta.features) == set(copy.meta.features)
+    assert len(direct) == len(copy) == len(png_dataset)
+    for i in range(len(direct)):
+        a, b = direct[i], copy[i]
+        assert a.keys() == b.keys()
+        for key, value in a.items():
+            assert torch.equal(value, b[key]) if isinstance(value, torch.Tensor) else value == b[key], key
+    assert (out / conversion.FRONTEND_META_DIR / "frontend.json").read_bytes() == (
+        tmp_path / "copy" / conversion.FRONTEND_META_DIR / "frontend.json").read_bytes()

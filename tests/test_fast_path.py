@@ -9,6 +9,7 @@ from rollout_checks import outputs_and_gradients
 
 from benchmarks.bench_core import control_stream, randomised_model, training_data, training_loss
 from lerobot_predvla import PredVLAConfig
+from lerobot_predvla.policies.predvla import recurrence_cpp
 from lerobot_predvla.policies.predvla.error_regression import ErrorRegression, WindowAdam
 from lerobot_predvla.policies.predvla.reference import reference_rollout
 
@@ -143,3 +144,49 @@ def test_carried_adam_state_slides_with_the_window():
     assert not torch.allclose(carried[-1], fresh[-1])
     with pytest.raises(ValueError, match="er_adam_state"):
         PredVLAConfig(device="cpu", er_adam_state="kept")
+
+
+@pytest.mark.parametrize("backend", ["python", "cpp"])
+@pytest.mark.parametrize("overrides", ABLATIONS.values(), ids=ABLATIONS.keys())
+def test_shared_acting_chain_has_the_gradients_of_two_rollouts_in_float64(backend, overrides):
+    """`posteriors_fit_actions=False`: the action term's chain from the posterior chain's forward
+    (`rollout_shared_acting`) gives the losses and every gradient (network and posteriors) of rolling the chain out
+    again with the posteriors detached, to float64 precision, on either backend."""
+    if backend == "cpp" and recurrence_cpp.missing_toolchain() is not None:
+        pytest.skip("no C++ toolchain")
+    model = randomised_model(PredVLAConfig(device="cpu", recurrence_backend=backend, **overrides)).double()
+    g = torch.Generator().manual_seed(2)
+    steps, batch = 11, 3
+    language = torch.randn(batch, 64, generator=g, dtype=torch.float64)
+    c_q = torch.randn(steps, batch, 256, generator=g, dtype=torch.float64)
+    vision = torch.randn(steps, batch, model.config.vision_dim, generator=g, dtype=torch.float64)
+    proprio = torch.randn(steps, batch, model.config.proprio_dim, generator=g, dtype=torch.float64)
+    action = torch.rand(steps, batch, model.config.action_dim, generator=g, dtype=torch.float64) * 1.8 - 0.9
+
+    def loss_and_grads(shared: bool) -> tuple[torch.Tensor, list[torch.Tensor]]:
+        posteriors = c_q.clone().requires_grad_(True)
+        start, lang = model.initial_state(batch), model.language_term(language)
+        if shared:
+            traj, acting = model.rollout_shared_acting(start, lang, posteriors)
+        else:
+            traj, acting = model.rollout(start, lang, posteriors), model.rollout(start, lang, posteriors.detach())
+        eps_v, eps_q = model.prediction_errors(traj, vision, proprio)
+        complexity = model.complexity(posteriors, model.priors(traj), model.config.complexity_weights)
+        loss = eps_v.mean() + eps_q.mean() + complexity.mean() + model.action_nll(acting, action).mean()
+        return loss, torch.autograd.grad(loss, [*model.parameters(), posteriors], allow_unused=True)
+
+    loss, grads = loss_and_grads(shared=True)
+    ref_loss, ref_grads = loss_and_grads(shared=False)
+    torch.testing.assert_close(loss, ref_loss, rtol=0, atol=1e-12)
+    names = [n for n, _ in model.named_parameters()] + ["posteriors"]
+    for name, g_shared, g_ref in zip(names, grads, ref_grads, strict=True):
+        assert (g_shared is None) == (g_ref is None), name
+        if g_ref is not None:
+            torch.testing.assert_close(g_shared, g_ref, rtol=0, atol=1e-10, msg=name)
+    # The action term's gradient reaches the network but not the posteriors, as it would with one rollout for both.
+    posteriors = c_q.clone().requires_grad_(True)
+    joint = model.rollout(model.initial_state(batch), model.language_term(language), posteriors)
+    eps_v, eps_q = model.prediction_errors(joint, vision, proprio)
+    complexity = model.complexity(posteriors, model.priors(joint), model.config.complexity_weights)
+    joint_loss = eps_v.mean() + eps_q.mean() + complexity.mean() + model.action_nll(joint, action).mean()
+    assert (torch.autograd.grad(joint_loss, posteriors)[0] - grads[-1]).abs().max() > 1e-6

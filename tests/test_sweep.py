@@ -520,3 +520,28 @@ def test_training_reads_the_features_only_copy(tmp_path):
     assert arg(resume, "resume") == "true" and arg(resume, "dataset.root") == str(copy)
     with pytest.raises(SweepError, match="train_root"):
         Sweep.load(sweep_file(tmp_path, datasets={**datasets, "libero_object": {"repo_id": "x", "train_root": "y"}}))
+
+
+def test_data_only_makes_the_datasets_without_frames_and_stops(tmp_path, monkeypatch, capsys):
+    """`predvla sweep --data-only` runs the `data` stages (here with `image_storage: none`, passed to the
+    conversion) and no training or evaluation; an unknown storage is named."""
+    from lerobot_predvla.cli import sweep as sweep_cli
+
+    data = {"libero_object": {"hdf5": "out/hdf5", "frontend": "out/frontend", "per_task": 3, "tasks": [0],
+                              "vision_weights": "random", "image_storage": "none"}}
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], data=data, eval={"device": "cpu"})
+    fake = FakeData()
+    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir: Runner(sweep, runs_dir, execute=fake))
+    assert predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs"), "--data-only"]) == 0
+    programs = [c[c.index("lerobot_predvla.cli.main") + 1] for c in fake.commands if "lerobot_predvla.cli.main" in c]
+    assert programs == ["demos", "fit-frontend", "convert"] and len(fake.commands) == 3
+    assert arg_value(fake.commands[2], "--image-storage") == "none"
+    (tmp_path / "bad").mkdir()
+    bad = sweep_file(tmp_path / "bad", seeds=[0], suites=["libero_object"],
+                     data={"libero_object": {**data["libero_object"], "image_storage": "jpeg"}})
+    assert predvla_main(["sweep", str(bad), "--runs-dir", str(tmp_path / "runs2"), "--data-only"]) == 2
+    assert "data.libero_object.image_storage must be one of" in capsys.readouterr().err
+
+
+def arg_value(command: list[str], flag: str) -> str:
+    return command[command.index(flag) + 1]

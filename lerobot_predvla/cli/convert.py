@@ -36,8 +36,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--image-storage", choices=IMAGE_STORAGES, default="video",
-        help="hdf5 only: camera frames as AV1 video (LeRobot default, small, lossy) or PNG (lossless, ~5x "
-        "larger). A LeRobot dataset keeps its own storage.",
+        help="hdf5 only: camera frames as AV1 video (LeRobot default, small, lossy), PNG (lossless, ~5x "
+        "larger) or none (the cached features only: what training reads, as `predvla features-only` makes it, "
+        "without encoding a video). A LeRobot dataset keeps its own storage.",
     )
     parser.add_argument("--language-dim", type=int, default=CONFIG_DEFAULTS["language_dim"])
     parser.add_argument("--vision-dim-per-camera", type=int, default=CONFIG_DEFAULTS["vision_dim_per_camera"])

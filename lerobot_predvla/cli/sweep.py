@@ -43,6 +43,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="Task parts of an evaluation run at once, one lerobot-eval process each (with eval.tasks; "
                              "e.g. 2 on a 2-core CPU, with OMP_NUM_THREADS=1).")
     parser.add_argument("--dry-run", action="store_true", help="Print this shard's commands and run nothing.")
+    parser.add_argument("--data-only", action="store_true",
+                        help="Make the suites' datasets (the file's `data` stages, each timed in "
+                             "RUNS_DIR/data/<suite>.json) and stop before any training.")
     parser.set_defaults(func=run)
 
 
@@ -83,6 +86,11 @@ def run(args: argparse.Namespace) -> int:
             for command in runner.pending_commands(args.configs, shard):
                 print(shlex.join(command))
             return 0
+        if args.data_only:
+            made = [runner.make_data(suite) for suite in sweep.settings.suites]
+            print(f"predvla sweep: datasets of {sum(made)} of {len(made)} suites ready; stage times in "
+                  f"{args.runs_dir / 'data'}")
+            return 0 if all(made) else 1
         outcome = runner.run(args.configs, shard)
     except SweepError as err:
         print(f"predvla sweep: error: {err}", file=sys.stderr)

@@ -32,7 +32,7 @@ from lerobot_predvla.utils.finite import check_finite
 OracleFeatures = Mapping[tuple[Path, str], np.ndarray]
 
 LIBERO_FPS = 20
-IMAGE_STORAGES = ("video", "png")
+IMAGE_STORAGES = ("video", "png", "none")  # "none": the cached features only, as `predvla features-only` keeps
 STATE_NAMES = [*(f"joint_{i}" for i in range(7)), "gripper_0", "gripper_1"]
 ACTION_NAMES = ["x", "y", "z", "roll", "pitch", "yaw", "gripper"]
 
@@ -69,7 +69,8 @@ def dataset_features(image_shapes: tuple, vision_dim: int, language_dim: int, im
 
 
 def _write_episodes(
-    dataset: LeRobotDataset, refs: list[DemoRef], frontend: FrozenFrontend, oracle: OracleFeatures | None
+    dataset: LeRobotDataset, refs: list[DemoRef], frontend: FrozenFrontend, oracle: OracleFeatures | None,
+    write_images: bool,
 ) -> None:
     instructions = sorted({ref.instruction for ref in refs})
     language = dict(zip(instructions, frontend.encode_instructions(instructions).numpy(), strict=True))
@@ -82,7 +83,7 @@ def _write_episodes(
             vision = _encode_vision(frontend, images) if oracle is None else oracle[(ref.file, ref.demo)]
             check_finite(vision, f"{ref.file}, demo '{ref.demo}'", OBS_VISION_FEATURES)
             for t in range(ref.num_frames):
-                frame = {camera: pixels[t] for camera, pixels in images.items()}
+                frame = {camera: pixels[t] for camera, pixels in images.items()} if write_images else {}
                 frame[OBS_STATE] = demo.state[t]
                 frame[ACTION] = demo.action[t]
                 frame[OBS_VISION_FEATURES] = vision[t]
@@ -128,7 +129,9 @@ def convert_suite(
         repo_id: Dataset repo id (default `local/<suite>`).
         language_dim: Required language feature size (checked against the artefact).
         vision_dim_per_camera: Required visual feature size per camera (checked against the artefact).
-        image_storage: "video" (LeRobot's default, AV1 MP4, lossy, small) or "png" (lossless, ~5x larger).
+        image_storage: "video" (LeRobot's default, AV1 MP4, lossy, small), "png" (lossless, ~5x larger) or "none"
+            (no camera column: what every policy of this plugin trains on, the same columns and values as
+            `predvla features-only` makes from a converted dataset, without encoding a video).
         batch_size: Images per ResNet18 forward pass.
         oracle: The oracle front end's standardisation and every demonstration's features (`libero.oracle.
             fit_oracle`): they replace the visual features, the dataset gets no camera, and the artefact saved
@@ -152,7 +155,8 @@ def convert_suite(
             repo_id=repo_id or f"local/{suite}",
             fps=LIBERO_FPS,
             features=dataset_features(
-                refs[0].image_shapes if oracle is None else (), artefact.vision_dim, artefact.language_dim,
+                refs[0].image_shapes if oracle is None and image_storage != "none" else (), artefact.vision_dim,
+                artefact.language_dim,
                 image_storage,
             ),
             root=staging / out.name,
@@ -160,7 +164,8 @@ def convert_suite(
             use_videos=image_storage == "video",
         )
         try:
-            _write_episodes(dataset, refs, frontend, None if oracle is None else oracle[1])
+            _write_episodes(dataset, refs, frontend, None if oracle is None else oracle[1],
+                            write_images=oracle is None and image_storage != "none")
         finally:
             dataset.finalize()
         artefact.save(staging / out.name / FRONTEND_META_DIR)

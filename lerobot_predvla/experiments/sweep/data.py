@@ -123,6 +123,8 @@ class DataStages(Workspace):
                     str(dataset),
                     "--repo-id",
                     self.sweep.settings.datasets[suite]["repo_id"],
+                    "--image-storage",
+                    spec.image_storage,
                     *(["--oracle"] if spec.oracle else []),
                 ],
             )

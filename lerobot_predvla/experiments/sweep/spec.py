@@ -12,6 +12,7 @@ from pathlib import Path
 import yaml
 
 from lerobot_predvla.columns import SUITES
+from lerobot_predvla.data.conversion import IMAGE_STORAGES
 from lerobot_predvla.experiments.lr_selection import LRSweep, candidate_name
 from lerobot_predvla.lerobot_commands import policy_args
 from lerobot_predvla.policies.recipe import NOT_RECIPE
@@ -186,6 +187,10 @@ class DataSpec:
             depends only on `demo_seed`, its task and its attempt.
         oracle: Convert with the oracle front end (`predvla convert --oracle`, a diagnostic: the simulator's object
             poses relative to the gripper instead of the cameras' features; docs/frontend.md). False by default.
+        image_storage: The converted dataset's camera frames (`predvla convert --image-storage`): 'video' (default),
+            'png', or 'none': the cached features only, which is all training reads (the same columns and values
+            as the `features-only` copy of a dataset with frames), without encoding the frames as video, the
+            longest part of a conversion. With 'none', `datasets.<suite>.root` is the training dataset itself.
     """
 
     hdf5: str
@@ -202,6 +207,7 @@ class DataSpec:
     frame_stride: int = 4
     workers: int = 1
     oracle: bool = False
+    image_storage: str = "video"
 
 
 @dataclass(frozen=True)
@@ -316,6 +322,10 @@ class Sweep:
                 raise SweepError(f"{path}: data.{suite}.hold_steps must be >= 0, got {spec.hold_steps}.")
             if spec.workers < 1:
                 raise SweepError(f"{path}: data.{suite}.workers must be >= 1, got {spec.workers}.")
+            if spec.image_storage not in IMAGE_STORAGES:
+                raise SweepError(
+                    f"{path}: data.{suite}.image_storage must be one of {IMAGE_STORAGES}, got {spec.image_storage!r}."
+                )
         sweep = cls(settings, {}, path.parent)
         for spec in configs:
             if spec.name in sweep.configs:

@@ -31,6 +31,11 @@ from lerobot_predvla.utils.manifest import verify_manifests
 from lerobot_predvla.utils.safe_loading import check_tensors, read_safetensors
 from lerobot_predvla.utils.threads import acting_threads
 
+# Without `posteriors_fit_actions` the action term's chain shares the posterior chain's forward
+# (`PredictiveModel.rollout_shared_acting`): the same losses and gradients as rolling it out again, which False does
+# (benchmarks and the test that compares the two).
+SHARED_ACTING_CHAIN = True
+
 
 def training_complexity(complexity: Tensor, mask: Tensor, reduction: str) -> Tensor:
     """C of Eq. 10 from the per-step C_t (time, batch): Eq. 10 puts no bar on C, so by default ("sum") it is
@@ -52,11 +57,15 @@ def training_terms(model: PredictiveModel, cfg: PredVLAConfig, seq: dict[str, Te
     sequences `seq` (`EpisodeSequences.batch`). Without `cfg.posteriors_fit_actions` the action term comes from the
     same rollout with c_q detached: the same value, no gradient into the posteriors."""
     valid = seq["valid"]
-    traj = model.rollout(model.initial_state(valid.shape[1]), lang_term, c_q)
+    start = model.initial_state(valid.shape[1])
+    if cfg.posteriors_fit_actions:
+        traj = acting = model.rollout(start, lang_term, c_q)
+    elif SHARED_ACTING_CHAIN:
+        traj, acting = model.rollout_shared_acting(start, lang_term, c_q)
+    else:
+        traj, acting = model.rollout(start, lang_term, c_q), model.rollout(start, lang_term, c_q.detach())
     eps_v, eps_q = model.prediction_errors(traj, seq["vision"], seq["state"])
     complexity = model.complexity(c_q, model.priors(traj), cfg.complexity_weights)
-    acting = traj if cfg.posteriors_fit_actions else model.rollout(
-        model.initial_state(valid.shape[1]), lang_term, c_q.detach())
     return {
         "vision_error": masked_mean(eps_v, refresh_mask(valid, cfg.visual_refresh_interval)),
         "proprio_error": masked_mean(eps_q, valid),

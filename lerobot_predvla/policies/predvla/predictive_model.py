@@ -13,7 +13,17 @@ from torch import Tensor, nn
 from lerobot_predvla.policies.common.action_head import GMMActionHead, mlp
 from lerobot_predvla.policies.predvla import recurrence_cpp
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
-from lerobot_predvla.policies.predvla.recurrence import A_BOTTOM, A_TOP, FusedWeights, Meta, T, V, recurrence
+from lerobot_predvla.policies.predvla.recurrence import (
+    A_BOTTOM,
+    A_TOP,
+    PYTHON_KERNELS,
+    FusedWeights,
+    Meta,
+    T,
+    V,
+    recurrence,
+    shared_acting_chain,
+)
 
 
 def autocast_dtype(device_type: str) -> torch.dtype | None:
@@ -210,8 +220,44 @@ class PredictiveModel(nn.Module):
         loops compiled in C++ where `config.recurrence_backend` selects them, `recurrence_cpp.loops`).
         """
         length = next(x.shape[0] for x in (c_q, extra_ab) if x is not None) if steps is None else steps
+        p = self._pre_activations(state, lang_term, c_q, extra_ab, length)
+        meta, inputs, weights, low = self._loop_inputs(state, p, c_q is None)
+        # The compiled loops are float32/float64 only: under mixed precision the Python ones run.
+        run = recurrence if low is not None else recurrence_cpp.loops(self.config.recurrence_backend, p[T])
+        with torch.autocast(p[T].device.type, enabled=False):  # the loops write into preallocated buffers
+            outputs = run(meta, *inputs, weights)
+        return self._trajectory(state, *(outputs if low is None else cast_floats(outputs, torch.float32)))
+
+    def rollout_shared_acting(
+        self, state: RecurrentState, lang_term: Tensor, c_q: Tensor
+    ) -> tuple[Trajectory, Trajectory]:
+        """`rollout(state, lang_term, c_q)` and `rollout(state, lang_term, c_q.detach())` from one run of the loops
+        (`recurrence.SharedActingChain`): the same values and gradients as the two rollouts. The second trajectory
+        is for the action term only: its GMM parameters carry their gradient to the network and not to c_q; its
+        other fields are the first's, detached."""
+        p = self._pre_activations(state, lang_term, c_q, None, c_q.shape[0])
+        p_act = self._pre_activations(state, lang_term, c_q.detach(), None, c_q.shape[0])
+        meta, (p, h, d, a, q), weights, low = self._loop_inputs(state, p, False)
+        if low is not None:
+            p_act = cast_floats(p_act, low)
+        kernels = PYTHON_KERNELS if low is not None else recurrence_cpp.kernels(self.config.recurrence_backend, p[T])
+        with torch.autocast(p[T].device.type, enabled=False):
+            *outputs, hidden_act = shared_acting_chain(kernels, meta, p, p_act, h, d, a, q, weights)
+        if low is not None:
+            outputs, hidden_act = cast_floats((outputs, hidden_act), torch.float32)
+        traj = self._trajectory(state, *outputs)
+        acting = Trajectory(
+            d=tuple(x.detach() for x in traj.d), d_prev_top=traj.d_prev_top.detach(), q_hat=traj.q_hat.detach(),
+            a_hat=traj.a_hat.detach(), action_params=self.action_head.from_hidden(
+                hidden_act[..., self.config.head_hidden_dim :]), final=traj.final.detach(),
+        )
+        return traj, acting
+
+    def _pre_activations(
+        self, state: RecurrentState, lang_term: Tensor, c_q: Tensor | None, extra_ab: Tensor | None, length: int
+    ) -> list[Tensor]:
+        """Input-independent pre-activation terms for every step: U^l c^l_q + b^l (+ W_lang l) (Eqs. 3-4)."""
         batch = state.h[T].shape[0]
-        # Input-independent pre-activation terms for every step: U^l c^l_q + b^l (+ W_lang l) (Eqs. 3-4).
         if c_q is None:
             p = [(self.bias[m] + self.latent[m](self.prior[m].bias)).expand(length, batch, -1) for m in range(4)]
         else:
@@ -220,19 +266,24 @@ class PredictiveModel(nn.Module):
         p[T] = p[T] + lang_term
         if extra_ab is not None:
             p[A_BOTTOM] = p[A_BOTTOM] + extra_ab
+        return p
+
+    def _loop_inputs(self, state: RecurrentState, p: list[Tensor], priors_on_the_fly: bool) -> tuple:
+        """The loops' meta, inputs (p, h, d, a, q) and weights, cast to the autocast dtype under mixed precision
+        (`--policy.use_amp`: the loops in that dtype, the losses in float32); and that dtype (None: none)."""
         cfg = self.config
         meta = Meta(self.alpha, cfg.use_efference_copy, cfg.num_mixtures, cfg.action_dim, cfg.proprio_dim)
-        weights = self.fused_weights(c_q is None)
+        weights = self.fused_weights(priors_on_the_fly)
         inputs = (p, state.h, state.d, state.a_hat, state.q_hat)
         low = autocast_dtype(p[T].device.type)
-        if low is not None:  # mixed precision (`--policy.use_amp`): the loops in `low`, the losses in float32
-            inputs, weights = cast_floats((inputs, weights), low)
-        # The compiled loops are float32/float64 only: under mixed precision the Python ones run.
-        run = recurrence if low is not None else recurrence_cpp.loops(cfg.recurrence_backend, p[T])
-        with torch.autocast(p[T].device.type, enabled=False):  # the loops write into preallocated buffers
-            d, q_hat, a_hat, hidden, h_final = run(meta, *inputs, weights)
         if low is not None:
-            d, q_hat, a_hat, hidden, h_final = cast_floats((d, q_hat, a_hat, hidden, h_final), torch.float32)
+            inputs, weights = cast_floats((inputs, weights), low)
+        return meta, inputs, weights, low
+
+    def _trajectory(
+        self, state: RecurrentState, d: list[Tensor], q_hat: Tensor, a_hat: Tensor, hidden: Tensor,
+        h_final: tuple[Tensor, ...],
+    ) -> Trajectory:
         final = RecurrentState(h_final, tuple(x[-1] for x in d), a_hat[-1], q_hat[-1])
         # Full GMM parameters (for the NLL) batched after the loop from the loop's hidden layer; their mode
         # is the loop's a_hat.

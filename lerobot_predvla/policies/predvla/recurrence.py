@@ -7,6 +7,7 @@ needs in preallocated buffers. The backward runs the recurrence in reverse with 
 then forms each weight gradient with one matmul over all steps. Pure tensor code: runs on any device.
 """
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import torch
@@ -138,105 +139,181 @@ def pack_outputs(
     return (*(buf[1:] for buf in dbuf), q_hat, abuf, y1, *h_final)
 
 
-class _Recurrence(torch.autograd.Function):
+def python_forward(meta: Meta, *args: Tensor) -> tuple[tuple[Tensor, ...], tuple[Tensor, ...]]:
+    """The Python loops' forward: the outputs (`pack_outputs`) and the buffers its backward reads, each with the
+    batch on dim 1."""
+    p, h, d, a0, q0, w = unpack_inputs(args)
+    (dbuf, gbuf, inbuf, y1, out, abuf, index), h_final = _forward(meta, p, h, d, a0, q0, w)
+    return pack_outputs(meta, dbuf, out, abuf, y1, h_final), (*dbuf, *gbuf, *inbuf[1:], y1, out, abuf, index)
+
+
+def python_backward(
+    meta: Meta, buffers: tuple[Tensor, ...], w: FusedWeights, grads: tuple[Tensor | None, ...],
+    needs_w: tuple[bool, ...],
+) -> tuple[Tensor | None, ...]:
+    """The Python loops' backward: the gradients of `unpack_inputs`' flat inputs from those of the outputs."""
+    dbuf, gbuf, inbuf = buffers[0:4], buffers[4:8], (None, *buffers[8:11])
+    y1, out, abuf, index = buffers[11:15]
+    g_d, g_q, g_a, g_y1, g_h = grads[0:4], grads[4], grads[5], grads[6], grads[7:11]
+    steps, batch = abuf.shape[:2]
+    nq, k, na = meta.proprio_dim, meta.num_mixtures, meta.action_dim
+    dims = [buf.shape[-1] for buf in dbuf]
+    # Batched derivative factors: d/dh tanh(h) = 1 - d^2, d/dpre [h] = 1/tau (1 - g^2), ReLU mask, and
+    # d a / d means = one-hot(argmax) (1 - a^2) for the mode's tanh mean.
+    dd = [1 - buf[1:].square() for buf in dbuf]
+    dg = [(alpha * (1 - buf.square())).unbind(0) for alpha, buf in zip(meta.alpha, gbuf, strict=True)]
+    relu_mask = (y1 > 0).to(y1.dtype).unbind(0)
+    one_hot = abuf.new_zeros((steps, batch, k, na)).scatter_(2, index, 1.0)
+    da = (one_hot * (1 - abuf.square()).unsqueeze(2)).unbind(0)
+    # External gradients on d^l enter h^l as ext (1 - d^2), added with the decayed carry (Eqs. 3-4).
+    ext_h = [None if g is None else (g * x).unbind(0) for g, x in zip(g_d, dd, strict=True)]
+    dd = [x.unbind(0) for x in dd]
+    gx_buf = [buf.new_empty(buf.shape) for buf in gbuf]  # gradient of each pre-activation
+    gout = out.new_zeros(out.shape)
+    gy1 = y1.new_empty(y1.shape)
+    gx, gy1_s = [b.unbind(0) for b in gx_buf], gy1.unbind(0)
+    gout_s, gout_q = gout.unbind(0), gout[..., :nq].unbind(0)
+    gout_means = gout[..., nq + k :].unflatten(-1, (k, na)).unbind(0)
+    ext_q = None if g_q is None else g_q.unbind(0)
+    ext_a = None if g_a is None else g_a.unbind(0)
+    ext_y1 = None if g_y1 is None else g_y1.unbind(0)
+    decay = [1.0 - alpha for alpha in meta.alpha]
+    gh = [abuf.new_zeros((batch, n)) if g is None else g.clone() for g, n in zip(g_h, dims, strict=True)]
+    for m in range(4):
+        if ext_h[m] is not None:
+            gh[m] = gh[m] + ext_h[m][-1]
+    d_t_, d_v_, d_at_, d_ab_ = dims
+    z_start = d_at_ + d_t_
+    # Input gradients of each module's matmul, written by step i into slot i % 2 and read, as the carry to
+    # step i - 1, from there: the gradients reaching d^l_{t-1} (the carry), d^T_t, z_t, a_{t-1}, q_{t-1} are
+    # fixed column views of the two slots, so the loop splits nothing. Zeros: nothing reaches step T - 1.
+    weights = [w.w_t, w.w_v, w.w_at, w.w_ab]
+    slots = [abuf.new_zeros((2, batch, x.shape[1])) for x in weights]
+    gin = [x.unbind(0) for x in slots]
+    # Per slot, as (slot 0, slot 1) pairs of views.
+    carry = [slots[m][..., :n].unbind(0) for m, n in enumerate(dims)]  # gradient reaching d^l_{t-1} from step t
+    gd_at = slots[A_BOTTOM][..., d_ab_:].unbind(0)
+    gd_t_at, gz = slots[A_TOP][..., d_at_:z_start].unbind(0), slots[A_TOP][..., z_start:].unbind(0)
+    gd_t_v = slots[V][..., d_v_ : d_v_ + d_t_].unbind(0)
+    if meta.efference:
+        carry_a, carry_q = slots[V][..., d_v_ + d_t_ : d_v_ + d_t_ + na], slots[V][..., d_v_ + d_t_ + na :]
+    else:
+        carry_a, carry_q = abuf.new_zeros((2, batch, na)), abuf.new_zeros((2, batch, nq))
+    carry_a3 = carry_a.unsqueeze(2).unbind(0)  # (batch, 1, a): broadcast over the mixture components
+    carry_a, carry_q = carry_a.unbind(0), carry_q.unbind(0)
+
+    def module(m: int, i: int, gd: Tensor) -> None:
+        """Leaky-integrator backward (Eqs. 3-4) of module m at step i; its input gradient goes to slot i % 2."""
+        gh_i = torch.addcmul(gh[m], gd, dd[m][i])
+        torch.mul(gh_i, dg[m][i], out=gx[m][i])
+        # Carry to step i - 1: (1 - 1/tau) gh_i, plus that step's external term.
+        no_ext = ext_h[m] is None or i == 0
+        gh[m] = torch.mul(gh_i, decay[m]) if no_ext else torch.add(ext_h[m][i - 1], gh_i, alpha=decay[m])
+        torch.mm(gx[m][i], weights[m], out=gin[m][i & 1])
+
+    for i in reversed(range(steps)):
+        now, c = i & 1, 1 - (i & 1)  # slot step i writes, slot holding step i + 1's input gradients
+        # Heads: q_hat and the selected component's tanh mean (the argmax carries no gradient).
+        if ext_q is None:
+            gout_q[i].copy_(carry_q[c])
+        else:
+            torch.add(carry_q[c], ext_q[i], out=gout_q[i])
+        if ext_a is not None:
+            torch.mul(da[i], (carry_a[c] + ext_a[i]).unsqueeze(1), out=gout_means[i])
+        elif meta.efference:
+            torch.mul(da[i], carry_a3[c], out=gout_means[i])
+        if ext_y1 is None:
+            torch.mm(gout_s[i], w.w2, out=gy1_s[i])
+        else:
+            torch.addmm(ext_y1[i], gout_s[i], w.w2, out=gy1_s[i])
+        gy1_s[i].mul_(relu_mask[i])
+        module(A_BOTTOM, i, torch.addmm(carry[A_BOTTOM][c], gy1_s[i], w.w1))
+        module(A_TOP, i, carry[A_TOP][c] + gd_at[now])
+        module(V, i, torch.addmm(carry[V][c], gz[now], w.w_va) if w.w_va is not None else carry[V][c])
+        module(T, i, torch.add(carry[T][c], gd_t_at[now]).add_(gd_t_v[now]))
+    carry, carry_a, carry_q = [x[0] for x in carry], carry_a[0], carry_q[0]  # step 0 wrote slot 0
+
+    grad_w = weight_gradients(needs_w, w, gx_buf, dbuf, inbuf[1:], y1, gy1, gout)
+    grad_a0, grad_q0 = (carry_a, carry_q) if meta.efference else (None, None)
+    return (*gx_buf, *gh, *carry, grad_a0, grad_q0, *grad_w)
+
+
+class Kernels(NamedTuple):
+    """One backend's loops: `forward(meta, *inputs)` -> (outputs, buffers with the batch on dim 1) and
+    `backward(meta, buffers, weights, output gradients, which weights need one)` -> the inputs' gradients."""
+
+    forward: Callable[..., tuple[tuple[Tensor, ...], tuple[Tensor, ...]]]
+    backward: Callable[..., tuple[Tensor | None, ...]]
+
+
+PYTHON_KERNELS = Kernels(python_forward, python_backward)
+WEIGHTS_AT = 14  # index of the first FusedWeights field among the flat inputs (`unpack_inputs`)
+
+
+class Recurrence(torch.autograd.Function):
+    """Eqs. 3-6 over a sequence as one autograd node, on either backend's `Kernels`."""
+
     @staticmethod
-    def forward(ctx, meta: Meta, *args: Tensor):
-        p, h, d, a0, q0, w = unpack_inputs(args)
-        (dbuf, gbuf, inbuf, y1, out, abuf, index), h_final = _forward(meta, p, h, d, a0, q0, w)
-        ctx.meta = meta
-        ctx.save_for_backward(*dbuf, *gbuf, *inbuf[1:], y1, out, abuf, index, *w)
-        ctx.has_va = w.w_va is not None
-        return pack_outputs(meta, dbuf, out, abuf, y1, h_final)
+    def forward(ctx, kernels: Kernels, meta: Meta, *args: Tensor):
+        outs, buffers = kernels.forward(meta, *args)
+        ctx.kernels, ctx.meta, ctx.buffers = kernels, meta, len(buffers)
+        ctx.save_for_backward(*buffers, *args[WEIGHTS_AT:])
+        return outs
 
     @staticmethod
     def backward(ctx, *grads: Tensor | None):
-        meta = ctx.meta
         saved = ctx.saved_tensors
-        dbuf, gbuf, inbuf = saved[0:4], saved[4:8], (None, *saved[8:11])
-        y1, out, abuf, index = saved[11:15]
-        w = FusedWeights(*saved[15:])
-        g_d, g_q, g_a, g_y1, g_h = grads[0:4], grads[4], grads[5], grads[6], grads[7:11]
-        steps, batch = abuf.shape[:2]
-        nq, k, na = meta.proprio_dim, meta.num_mixtures, meta.action_dim
-        dims = [buf.shape[-1] for buf in dbuf]
-        # Batched derivative factors: d/dh tanh(h) = 1 - d^2, d/dpre [h] = 1/tau (1 - g^2), ReLU mask, and
-        # d a / d means = one-hot(argmax) (1 - a^2) for the mode's tanh mean.
-        dd = [1 - buf[1:].square() for buf in dbuf]
-        dg = [(alpha * (1 - buf.square())).unbind(0) for alpha, buf in zip(meta.alpha, gbuf, strict=True)]
-        relu_mask = (y1 > 0).to(y1.dtype).unbind(0)
-        one_hot = abuf.new_zeros((steps, batch, k, na)).scatter_(2, index, 1.0)
-        da = (one_hot * (1 - abuf.square()).unsqueeze(2)).unbind(0)
-        # External gradients on d^l enter h^l as ext (1 - d^2), added with the decayed carry (Eqs. 3-4).
-        ext_h = [None if g is None else (g * x).unbind(0) for g, x in zip(g_d, dd, strict=True)]
-        dd = [x.unbind(0) for x in dd]
-        gx_buf = [buf.new_empty(buf.shape) for buf in gbuf]  # gradient of each pre-activation
-        gout = out.new_zeros(out.shape)
-        gy1 = y1.new_empty(y1.shape)
-        gx, gy1_s = [b.unbind(0) for b in gx_buf], gy1.unbind(0)
-        gout_s, gout_q = gout.unbind(0), gout[..., :nq].unbind(0)
-        gout_means = gout[..., nq + k :].unflatten(-1, (k, na)).unbind(0)
-        ext_q = None if g_q is None else g_q.unbind(0)
-        ext_a = None if g_a is None else g_a.unbind(0)
-        ext_y1 = None if g_y1 is None else g_y1.unbind(0)
-        decay = [1.0 - alpha for alpha in meta.alpha]
-        gh = [abuf.new_zeros((batch, n)) if g is None else g.clone() for g, n in zip(g_h, dims, strict=True)]
-        for m in range(4):
-            if ext_h[m] is not None:
-                gh[m] = gh[m] + ext_h[m][-1]
-        d_t_, d_v_, d_at_, d_ab_ = dims
-        z_start = d_at_ + d_t_
-        # Input gradients of each module's matmul, written by step i into slot i % 2 and read, as the carry to
-        # step i - 1, from there: the gradients reaching d^l_{t-1} (the carry), d^T_t, z_t, a_{t-1}, q_{t-1} are
-        # fixed column views of the two slots, so the loop splits nothing. Zeros: nothing reaches step T - 1.
-        weights = [w.w_t, w.w_v, w.w_at, w.w_ab]
-        slots = [abuf.new_zeros((2, batch, x.shape[1])) for x in weights]
-        gin = [x.unbind(0) for x in slots]
-        # Per slot, as (slot 0, slot 1) pairs of views.
-        carry = [slots[m][..., :n].unbind(0) for m, n in enumerate(dims)]  # gradient reaching d^l_{t-1} from step t
-        gd_at = slots[A_BOTTOM][..., d_ab_:].unbind(0)
-        gd_t_at, gz = slots[A_TOP][..., d_at_:z_start].unbind(0), slots[A_TOP][..., z_start:].unbind(0)
-        gd_t_v = slots[V][..., d_v_ : d_v_ + d_t_].unbind(0)
-        if meta.efference:
-            carry_a, carry_q = slots[V][..., d_v_ + d_t_ : d_v_ + d_t_ + na], slots[V][..., d_v_ + d_t_ + na :]
-        else:
-            carry_a, carry_q = abuf.new_zeros((2, batch, na)), abuf.new_zeros((2, batch, nq))
-        carry_a3 = carry_a.unsqueeze(2).unbind(0)  # (batch, 1, a): broadcast over the mixture components
-        carry_a, carry_q = carry_a.unbind(0), carry_q.unbind(0)
+        buffers, w = saved[: ctx.buffers], FusedWeights(*saved[ctx.buffers :])
+        needs_w = ctx.needs_input_grad[2 + WEIGHTS_AT :]
+        return (None, None, *ctx.kernels.backward(ctx.meta, buffers, w, grads, needs_w))
 
-        def module(m: int, i: int, gd: Tensor) -> None:
-            """Leaky-integrator backward (Eqs. 3-4) of module m at step i; its input gradient goes to slot i % 2."""
-            gh_i = torch.addcmul(gh[m], gd, dd[m][i])
-            torch.mul(gh_i, dg[m][i], out=gx[m][i])
-            # Carry to step i - 1: (1 - 1/tau) gh_i, plus that step's external term.
-            no_ext = ext_h[m] is None or i == 0
-            gh[m] = torch.mul(gh_i, decay[m]) if no_ext else torch.add(ext_h[m][i - 1], gh_i, alpha=decay[m])
-            torch.mm(gx[m][i], weights[m], out=gin[m][i & 1])
 
-        for i in reversed(range(steps)):
-            now, c = i & 1, 1 - (i & 1)  # slot step i writes, slot holding step i + 1's input gradients
-            # Heads: q_hat and the selected component's tanh mean (the argmax carries no gradient).
-            if ext_q is None:
-                gout_q[i].copy_(carry_q[c])
-            else:
-                torch.add(carry_q[c], ext_q[i], out=gout_q[i])
-            if ext_a is not None:
-                torch.mul(da[i], (carry_a[c] + ext_a[i]).unsqueeze(1), out=gout_means[i])
-            elif meta.efference:
-                torch.mul(da[i], carry_a3[c], out=gout_means[i])
-            if ext_y1 is None:
-                torch.mm(gout_s[i], w.w2, out=gy1_s[i])
-            else:
-                torch.addmm(ext_y1[i], gout_s[i], w.w2, out=gy1_s[i])
-            gy1_s[i].mul_(relu_mask[i])
-            module(A_BOTTOM, i, torch.addmm(carry[A_BOTTOM][c], gy1_s[i], w.w1))
-            module(A_TOP, i, carry[A_TOP][c] + gd_at[now])
-            module(V, i, torch.addmm(carry[V][c], gz[now], w.w_va) if ctx.has_va else carry[V][c])
-            module(T, i, torch.add(carry[T][c], gd_t_at[now]).add_(gd_t_v[now]))
-        carry, carry_a, carry_q = [x[0] for x in carry], carry_a[0], carry_q[0]  # step 0 wrote slot 0
+class SharedActingChain(torch.autograd.Function):
+    """Eqs. 3-6 run once for two chains of equal values that differ in their gradients only.
 
-        grad_w = weight_gradients(ctx.needs_input_grad[15:], w, gx_buf, dbuf, inbuf[1:], y1, gy1, gout)
-        grad_a0, grad_q0 = (carry_a, carry_q) if meta.efference else (None, None)
-        return (None, *gx_buf, *gh, *carry, grad_a0, grad_q0, *grad_w)
+    The posterior chain (priors `p`, every output) carries every term of Eq. 10 but the action term; the action
+    term's chain (priors `p_act`, equal to `p` in value: the same posteriors detached) carries the action term, whose
+    gradient then reaches the network and not the posteriors (`PredVLAConfig.posteriors_fit_actions=False`). The
+    values of both chains are the forward's, computed once; its only extra output is a copy of the heads' hidden layer,
+    the action term's input. Every gradient is that of two separate rollouts (the shared initial states and weights
+    get their sum), from two backward passes over the one forward's buffers.
+    """
+
+    @staticmethod
+    def forward(ctx, kernels: Kernels, meta: Meta, *args: Tensor):
+        inputs = args[:-4]  # the last four are p_act: the same values as p, only a gradient goes there
+        outs, buffers = kernels.forward(meta, *inputs)
+        ctx.kernels, ctx.meta, ctx.buffers = kernels, meta, len(buffers)
+        ctx.save_for_backward(*buffers, *inputs[WEIGHTS_AT:])
+        return (*outs, outs[6].clone())  # outs[6]: the heads' hidden layer y1 (`pack_outputs`)
+
+    @staticmethod
+    def backward(ctx, *grads: Tensor | None):
+        saved, grads, g_act = ctx.saved_tensors, grads[:-1], grads[-1]
+        buffers, w = saved[: ctx.buffers], FusedWeights(*saved[ctx.buffers :])
+        needs_w = ctx.needs_input_grad[2 + WEIGHTS_AT : 2 + WEIGHTS_AT + len(FusedWeights._fields)]
+        if g_act is None:  # no action term: the posterior chain alone
+            return (None, None, *ctx.kernels.backward(ctx.meta, buffers, w, grads, needs_w), None, None, None, None)
+        # The backward is linear in the outputs' gradients: one pass with both chains' together gives every
+        # gradient but the split of the priors' between p and p_act; a second pass with the action chain's alone
+        # (no weight gradient) gives p_act's, and p's is the rest.
+        y1_at = 6  # position of the heads' hidden layer among the outputs (`pack_outputs`)
+        both = tuple(g_act if i == y1_at and g is None else g + g_act if i == y1_at else g for i, g in enumerate(grads))
+        out = ctx.kernels.backward(ctx.meta, buffers, w, both, needs_w)
+        action_only = tuple(g_act if i == y1_at else None for i in range(len(grads)))
+        g_p_act = ctx.kernels.backward(ctx.meta, buffers, w, action_only, (False,) * len(needs_w))[0:4]
+        g_p = [total - act for total, act in zip(out[0:4], g_p_act, strict=True)]
+        return (None, None, *g_p, *out[4:], *g_p_act)
+
+
+def shared_acting_chain(
+    kernels: Kernels, meta: Meta, p: list[Tensor], p_act: list[Tensor], h: tuple[Tensor, ...],
+    d: tuple[Tensor, ...], a: Tensor, q: Tensor, w: FusedWeights,
+) -> tuple[list[Tensor], Tensor, Tensor, Tensor, tuple[Tensor, ...], Tensor]:
+    """`recurrence`'s outputs for priors `p`, and the heads' hidden layer of the action term's chain, whose gradient
+    goes to `p_act` (equal to `p` in value) instead of `p` (`SharedActingChain`)."""
+    outs = SharedActingChain.apply(kernels, meta, *p, *h, *d, a, q, *w, *p_act)
+    return list(outs[0:4]), outs[4], outs[5], outs[6], tuple(outs[7:11]), outs[11]
 
 
 def recurrence(
@@ -247,5 +324,5 @@ def recurrence(
     Returns, time-major, d^l of every module, q_hat, a_hat and the heads' hidden layer [q | action] (after
     ReLU), and the final h^l.
     """
-    outs = _Recurrence.apply(meta, *p, *h, *d, a, q, *w)
+    outs = Recurrence.apply(PYTHON_KERNELS, meta, *p, *h, *d, a, q, *w)
     return list(outs[0:4]), outs[4], outs[5], outs[6], tuple(outs[7:11])

@@ -1,12 +1,12 @@
 """The fused recurrence's per-step loops compiled in C++ (`PredVLAConfig.recurrence_backend`, "auto" or "cpp").
 
-Same equations, buffers, matmuls and gradients as `recurrence._forward` and `_Recurrence.backward` (Eqs. 3-6 and
+Same equations, buffers, matmuls and gradients as `recurrence.python_forward` and `python_backward` (Eqs. 3-6 and
 their hand-written BPTT): the matmuls are the same ATen calls on the same operands (so the benchmark's floor, which
 replays recorded matmuls, is the same), while everything between them (tanh, the leaky integration, the
 concatenations, ReLU, the GMM mode, the BPTT's elementwise products) runs as one plain C++ loop per module and step
-instead of ~21 dispatched ATen ops, below autograd's dispatch keys (the autograd node is `_CppRecurrence`). At batch 1
-error regression is dominated by those dispatches (docs/speed.md). The weight gradients after the loop are the Python
-path's (`recurrence.weight_gradients`).
+instead of ~21 dispatched ATen ops, below autograd's dispatch keys (the autograd node is `recurrence.Recurrence` on
+`CPP_KERNELS`). At batch 1 error regression is dominated by those dispatches (docs/speed.md). The weight
+gradients after the loop are the Python path's (`recurrence.weight_gradients`).
 
 The extension's source is `recurrence.cpp` beside this module (package data). It is compiled with
 `torch.utils.cpp_extension.load_inline` (g++ and ninja needed; ~30 s on 2 cores), once per Python and torch version
@@ -37,8 +37,11 @@ import torch
 from torch import Tensor
 
 from lerobot_predvla.policies.predvla.recurrence import (
+    PYTHON_KERNELS,
     FusedWeights,
+    Kernels,
     Meta,
+    Recurrence,
     pack_outputs,
     unpack_inputs,
     weight_gradients,
@@ -159,37 +162,41 @@ def loops(backend: str, like: Tensor) -> Callable[..., tuple]:
     return recurrence if compiled else python_recurrence
 
 
-class _CppRecurrence(torch.autograd.Function):
-    """`recurrence._Recurrence` with the compiled loops: same inputs, outputs and gradients."""
+def kernels(backend: str, like: Tensor) -> Kernels:
+    """The loops `loops(backend, like)` runs, as `Kernels` (for `recurrence.shared_acting_chain`)."""
+    return CPP_KERNELS if loops(backend, like) is recurrence else PYTHON_KERNELS
 
-    @staticmethod
-    def forward(ctx, meta: Meta, *args: Tensor):
-        p, h, d, a0, q0, w = unpack_inputs(args)
-        outs = extension().forward(
-            list(meta.alpha), meta.efference, meta.num_mixtures, meta.action_dim, meta.proprio_dim, p, h, d, a0, q0,
-            [w.w_t.t(), w.w_v.t(), w.w_at.t(), w.w_ab.t()], None if w.w_va is None else w.w_va.t(),
-            w.w1.t(), w.b1, w.w2.t(), w.b2,
-        )
-        dbuf, gbuf, inbuf, (y1, out, abuf, index), h_final = outs[0:4], outs[4:8], outs[8:11], outs[11:15], outs[15:19]
-        ctx.meta = meta
-        ctx.save_for_backward(*dbuf, *gbuf, *inbuf, y1, abuf, index, *w)
-        return pack_outputs(meta, dbuf, out, abuf, y1, h_final)
 
-    @staticmethod
-    def backward(ctx, *grads: Tensor | None):
-        meta = ctx.meta
-        saved = ctx.saved_tensors
-        dbuf, gbuf, inbuf, (y1, abuf, index), w = saved[0:4], saved[4:8], saved[8:11], saved[11:14], saved[14:]
-        w = FusedWeights(*w)
-        outs = extension().backward(
-            list(meta.alpha), meta.efference, meta.num_mixtures, meta.action_dim, meta.proprio_dim,
-            list(dbuf), list(gbuf), y1, abuf, index, [w.w_t, w.w_v, w.w_at, w.w_ab], w.w_va, w.w1, w.w2,
-            list(grads[0:4]), grads[4], grads[5], grads[6], list(grads[7:11]),
-        )
-        gx, (gout, gy1), gh, carry = outs[0:4], outs[4:6], outs[6:10], outs[10:14]
-        grad_a0, grad_q0 = outs[14:16] if meta.efference else (None, None)
-        grad_w = weight_gradients(ctx.needs_input_grad[15:], w, list(gx), list(dbuf), list(inbuf), y1, gy1, gout)
-        return (None, *gx, *gh, *carry, grad_a0, grad_q0, *grad_w)
+def cpp_forward(meta: Meta, *args: Tensor) -> tuple[tuple[Tensor, ...], tuple[Tensor, ...]]:
+    """The compiled loops' forward: the outputs and the buffers its backward reads (batch on dim 1)."""
+    p, h, d, a0, q0, w = unpack_inputs(args)
+    outs = extension().forward(
+        list(meta.alpha), meta.efference, meta.num_mixtures, meta.action_dim, meta.proprio_dim, p, h, d, a0, q0,
+        [w.w_t.t(), w.w_v.t(), w.w_at.t(), w.w_ab.t()], None if w.w_va is None else w.w_va.t(),
+        w.w1.t(), w.b1, w.w2.t(), w.b2,
+    )
+    dbuf, gbuf, inbuf, (y1, out, abuf, index), h_final = outs[0:4], outs[4:8], outs[8:11], outs[11:15], outs[15:19]
+    return pack_outputs(meta, dbuf, out, abuf, y1, h_final), (*dbuf, *gbuf, *inbuf, y1, abuf, index)
+
+
+def cpp_backward(
+    meta: Meta, buffers: tuple[Tensor, ...], w: FusedWeights, grads: tuple[Tensor | None, ...],
+    needs_w: tuple[bool, ...],
+) -> tuple[Tensor | None, ...]:
+    """The compiled loops' backward: the gradients of `unpack_inputs`' flat inputs from those of the outputs."""
+    dbuf, gbuf, inbuf, (y1, abuf, index) = buffers[0:4], buffers[4:8], buffers[8:11], buffers[11:14]
+    outs = extension().backward(
+        list(meta.alpha), meta.efference, meta.num_mixtures, meta.action_dim, meta.proprio_dim,
+        list(dbuf), list(gbuf), y1, abuf, index, [w.w_t, w.w_v, w.w_at, w.w_ab], w.w_va, w.w1, w.w2,
+        list(grads[0:4]), grads[4], grads[5], grads[6], list(grads[7:11]),
+    )
+    gx, (gout, gy1), gh, carry = outs[0:4], outs[4:6], outs[6:10], outs[10:14]
+    grad_a0, grad_q0 = outs[14:16] if meta.efference else (None, None)
+    grad_w = weight_gradients(needs_w, w, list(gx), list(dbuf), list(inbuf), y1, gy1, gout)
+    return (*gx, *gh, *carry, grad_a0, grad_q0, *grad_w)
+
+
+CPP_KERNELS = Kernels(cpp_forward, cpp_backward)
 
 
 def recurrence(
@@ -201,5 +208,5 @@ def recurrence(
             f"PredVLAConfig.recurrence_backend='cpp' runs on CPU tensors in float32 or float64, got {a.device} "
             f"{a.dtype}; use recurrence_backend='python' on other devices and dtypes."
         )
-    outs = _CppRecurrence.apply(meta, *p, *h, *d, a, q, *w)
+    outs = Recurrence.apply(CPP_KERNELS, meta, *p, *h, *d, a, q, *w)
     return list(outs[0:4]), outs[4], outs[5], outs[6], tuple(outs[7:11])
