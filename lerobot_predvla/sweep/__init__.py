@@ -1,10 +1,11 @@
 """Experiment runner: `lerobot-train` then `lerobot-eval` for configurations x suites x seeds.
 
 A sweep file (YAML or JSON) lists configurations; every (configuration, suite, seed) is one run whose result is
-a JSON record `RUNS_DIR/records/<config>/<suite>/seed<k>.json`. Runs with a record are skipped, a training
-killed midway resumes from its last checkpoint (`lerobot-train --resume=true`), an evaluation killed midway is
-redone. Inference-time variants (`checkpoint_from: <config>`) evaluate another configuration's checkpoints
-with extra `lerobot-eval` arguments and train nothing themselves.
+a JSON record `RUNS_DIR/records/<config>/<suite>/seed<k>.json`. Runs whose record holds the tasks asked for are
+skipped (a call for other tasks adds them to the record), a training killed midway resumes from its last
+checkpoint (`lerobot-train --resume=true`), an evaluation killed midway is redone. Inference-time variants
+(`checkpoint_from: <config>`) evaluate another configuration's checkpoints with extra `lerobot-eval` arguments and
+train nothing themselves.
 
 A configuration with `lr_sweep` first chooses its learning rate on held-out demonstrations (`lr_selection.py`):
 one shorter candidate training per rate, then its own training at the chosen rate.

@@ -1,5 +1,6 @@
 """The sweep runner: every run of a sweep (or of this shard's training units), each checkpoint trained once and
-evaluated by every run that uses it, runs with a record skipped; `plan.json` lists what was planned."""
+evaluated by every run that uses it, runs whose record holds the tasks asked for skipped; `plan.json` lists what was
+planned."""
 
 import json
 from dataclasses import asdict
@@ -74,7 +75,7 @@ class Runner(Training, Evaluation):
         """The commands `run` would start now (for --dry-run); a resumed training shows its resume command."""
         commands, data_done, selected = [], set(), set()
         for (trained, suite, seed), unit_runs in self.shard_units(configs, shard):
-            pending = [r for r in unit_runs if not self.record_path(r).is_file()]
+            pending = [r for r in unit_runs if not self.is_recorded(r)]
             if not pending:
                 continue
             out = self.train_dir(trained, suite, seed)
@@ -107,7 +108,7 @@ class Runner(Training, Evaluation):
         outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": []}
         bar = tqdm(total=sum(len(r) for _, r in units), desc=f"sweep shard {shard[0]}/{shard[1]}", disable=not progress)
         for (trained, suite, seed), unit_runs in units:
-            pending = [r for r in unit_runs if not self.record_path(r).is_file()]
+            pending = [r for r in unit_runs if not self.is_recorded(r)]
             outcome["skipped"] += [r.key for r in unit_runs if r not in pending]
             bar.update(len(unit_runs) - len(pending))
             if not pending:
