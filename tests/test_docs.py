@@ -364,7 +364,7 @@ def test_every_documented_command_exists():
                 except SystemExit:
                     wrong.append(f"{path.name}: `{command}` does not parse against `predvla`'s arguments")
                 checked += 1
-            elif words[:3] == ["python", "-m", words[2]] and words[2].startswith("research."):
+            elif words[:2] == ["python", "-m"] and len(words) > 2 and words[2].startswith("research."):
                 try:  # a research command runs from the checkout: its module's (or package's __main__'s) parser
                     module = importlib.import_module(words[2])
                     if not hasattr(module, "build_parser"):
