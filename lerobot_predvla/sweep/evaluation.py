@@ -76,6 +76,7 @@ class Evaluation(Workspace):
         return [(out / f"task{t}", [f"--env.task_ids=[{t}]"]) for t in tasks]
 
     def read_record(self, run: Run) -> dict:
+        """The run's record; a file that is not one is named, with what to do."""
         path = self.record_path(run)
         try:
             record = json.loads(path.read_text())
