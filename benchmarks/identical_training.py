@@ -2,7 +2,7 @@
 
 Each commit is checked out as a temporary `git worktree` and trained with this environment's `lerobot-train`, its
 code taken from the worktree (`PYTHONPATH`), for `--steps` steps of `--policy.type=predvla` on CPU, one thread, on
-one small synthetic dataset (`predvla synthetic-demo`'s, written once and read by both). The two
+one small synthetic dataset (`predvla demo synthetic`'s, written once and read by both). The two
 `model.safetensors` are then compared byte for byte. For a refactor that must not change training:
 
     python -m benchmarks.identical_training main            # main against HEAD
@@ -28,7 +28,7 @@ WEIGHTS_FILE = "model.safetensors"
 
 
 def train_command(dataset: Path, out: Path, steps: int, seed: int) -> list[str]:
-    """`predvla synthetic-demo`'s training, with a fixed seed and a single checkpoint at the last step."""
+    """`predvla demo synthetic`'s training, with a fixed seed and a single checkpoint at the last step."""
     return [
         LEROBOT_TRAIN,
         "--policy.type=predvla",

@@ -1,5 +1,5 @@
 """The command lines of LeRobot's `lerobot-train` and `lerobot-eval`, built here for every caller: the sweep runner,
-`predvla synthetic-demo`, `predvla libero-demo`, `predvla robot-example`, the kill-and-resume harness and the model
+`predvla demo synthetic`, `predvla demo libero`, `predvla demo robot`, the kill-and-resume harness and the model
 card's evaluation command; and how those callers start the plugin's own `predvla` command.
 
 Each command puts its flags in one order (draccus reads them in any): the program, the policy, the data or

@@ -8,10 +8,9 @@ from pathlib import Path
 import pytest
 
 from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments import headline
-from lerobot_predvla.experiments.eval_info import parse_eval_info
-from lerobot_predvla.experiments.report import ReportError
+from lerobot_predvla.report import ReportError, headline
 from lerobot_predvla.sims.libero import blind_replay
+from lerobot_predvla.sweep.eval_info import parse_eval_info
 from lerobot_predvla.utils.io import atomic_write_json
 
 REPO = Path(__file__).resolve().parents[1]

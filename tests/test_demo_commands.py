@@ -1,4 +1,4 @@
-"""`predvla libero-demo --device`: the device reaches lerobot-train and lerobot-eval (stages faked, no simulator)."""
+"""`predvla demo libero --device`: the device reaches lerobot-train and lerobot-eval (stages faked, no simulator)."""
 
 import json
 from pathlib import Path
@@ -30,7 +30,7 @@ def fake_stages(commands: list[list[str]]):
 def test_libero_demo_passes_the_device_to_lerobot(tmp_path, monkeypatch, device_args, device):
     commands: list[list[str]] = []
     monkeypatch.setattr(libero_demo, "_run", fake_stages(commands))
-    args = ["libero-demo", "--out", str(tmp_path), "--episodes", "2", "--suite-checkpoint", "none"]
+    args = ["demo", "libero", "--out", str(tmp_path), "--episodes", "2", "--suite-checkpoint", "none"]
     assert predvla_main([*args, *device_args]) == 0
     train = [c for c in commands if c[0].endswith("lerobot-train")]
     evals = [c for c in commands if c[0].endswith("lerobot-eval")]
@@ -49,7 +49,7 @@ def test_libero_demo_evaluates_the_suite_checkpoint_on_two_tasks(tmp_path, monke
     commands: list[list[str]] = []
     monkeypatch.setattr(libero_demo, "_run", fake_stages(commands))
     out = tmp_path / "demo"
-    assert predvla_main(["libero-demo", "--out", str(out), "--episodes", "2", "--suite-checkpoint", str(suite),
+    assert predvla_main(["demo", "libero", "--out", str(out), "--episodes", "2", "--suite-checkpoint", str(suite),
                          "--suite-tasks", "0,7", "--suite-episodes", "3"]) == 0
     evals = [c for c in commands if c[0].endswith("lerobot-eval")]
     assert len(evals) == 4
@@ -66,5 +66,5 @@ def test_libero_demo_evaluates_the_suite_checkpoint_on_two_tasks(tmp_path, monke
     # A missing checkpoint is said, and the stage skipped; the demo's own results stand.
     commands.clear()
     other = tmp_path / "demo2"
-    assert predvla_main(["libero-demo", "--out", str(other), "--suite-checkpoint", str(tmp_path / "nowhere")]) == 0
+    assert predvla_main(["demo", "libero", "--out", str(other), "--suite-checkpoint", str(tmp_path / "nowhere")]) == 0
     assert "suite_checkpoint" not in json.loads((other / "results.json").read_text())

@@ -1,4 +1,4 @@
-"""`predvla divergence`: the open loop against demonstrations from their own starts.
+"""`python -m research.divergence`: the open loop against demonstrations from their own starts.
 
 The helpers on synthetic arrays; then the real command on the simulator (physics only): two scripted-expert
 episodes written with the repository's demo writer (images left black: the command reads none), the shipped
@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from lerobot_predvla.experiments import divergence as dv
+from research.divergence import simulation as dv
 
 CHECKPOINT = "checkpoints/predvla_libero_object_table2"
 SUITE, TASK_ID = "libero_object", 0
@@ -109,10 +109,10 @@ def demo_root(tmp_path_factory):
 
 @pytest.mark.simulator
 def test_divergence_command_on_the_simulator(demo_root):
-    from lerobot_predvla.cli.main import main
+    from research.divergence.__main__ import main
 
     out = demo_root / "out"
-    assert main(["divergence", "--checkpoint", CHECKPOINT, "--hdf5-root", str(demo_root / "hdf5"), "--tasks",
+    assert main(["--checkpoint", CHECKPOINT, "--hdf5-root", str(demo_root / "hdf5"), "--tasks",
                  str(TASK_ID), "--demos", "1", "--cap", "30", "--out", str(out)]) == 0
     assert (out / f"task{TASK_ID}.png").stat().st_size > 10_000
     report = json.loads((out / "divergence.json").read_text())

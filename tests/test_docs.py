@@ -1,6 +1,7 @@
 """The documentation against what it documents: the generated headline against the committed reports, the shipped
 checkpoints' configs against the machine, and every command block against the `predvla` CLI and the Makefile."""
 
+import importlib
 import json
 import re
 import shlex
@@ -11,7 +12,8 @@ import pytest
 
 from lerobot_predvla.cli.main import build_parser
 from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments.headline import (
+from lerobot_predvla.hub.upload import shipped_checkpoints, without_machine_paths
+from lerobot_predvla.report.headline import (
     EXPERIMENTS,
     HEADLINE_END,
     HEADLINE_START,
@@ -20,12 +22,25 @@ from lerobot_predvla.experiments.headline import (
     row_numbers,
     update_docs,
 )
-from lerobot_predvla.experiments.report.results import ReportError
-from lerobot_predvla.hub.upload import shipped_checkpoints, without_machine_paths
+from lerobot_predvla.report.results import ReportError
 from lerobot_predvla.utils.io import atomic_write_json
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = [REPO / README, *sorted((REPO / "docs").glob("*.md")), *sorted((REPO / "docs/research").glob("*.md"))]
+
+
+README_MAX_LINES = 200
+
+
+def test_readme_is_short_and_starts_with_the_demo_and_the_tests():
+    """The README stays a front page (reference material lives in docs/), and its first commands are the two a
+    newcomer runs: `make demo`, then `make test`."""
+    text = (REPO / README).read_text()
+    lines = len(text.splitlines())
+    assert lines <= README_MAX_LINES, f"README.md has {lines} lines; move reference material to docs/"
+    first_block = re.search(r"```bash\n(.*?)```", text, flags=re.S).group(1)
+    commands = [line.split("#")[0].split() for line in first_block.splitlines() if line.split("#")[0].strip()]
+    assert commands == [["make", "demo"], ["make", "test"]]
 
 
 def _block(path: Path) -> str:
@@ -281,7 +296,7 @@ def test_shipped_checkpoints_include_the_models_sweeps_publish():
 
 @pytest.mark.parametrize("where", ["shipped", "sweep/predvla_seed0"])  # checkpoints/<name>/, a sweep's train.publish
 def test_report_docs_rewrites_a_checkpoint_that_pins_the_device_and_keeps_its_manifest(tmp_path, where):
-    from lerobot_predvla.experiments.headline import stale_checkpoint_files
+    from lerobot_predvla.report.headline import stale_checkpoint_files
     from lerobot_predvla.utils.io import atomic_write_bytes
     from lerobot_predvla.utils.manifest import verify_manifests, write_manifest
 
@@ -349,6 +364,15 @@ def test_every_documented_command_exists():
                 except SystemExit:
                     wrong.append(f"{path.name}: `{command}` does not parse against `predvla`'s arguments")
                 checked += 1
+            elif words[:2] == ["python", "-m"] and len(words) > 2 and words[2].startswith("research."):
+                try:  # a research command runs from the checkout: its module's (or package's __main__'s) parser
+                    module = importlib.import_module(words[2])
+                    if not hasattr(module, "build_parser"):
+                        module = importlib.import_module(f"{words[2]}.__main__")
+                    module.build_parser().parse_args([w for w in words[3:] if w != "..."])
+                except (ImportError, AttributeError, SystemExit):
+                    wrong.append(f"{path.name}: `{command}` does not parse against {words[2]}'s arguments")
+                checked += 1
     assert checked > 20
     assert not wrong, "\n".join(wrong)
 
@@ -375,7 +399,7 @@ def test_bracket_arguments_are_quoted():
 
 # ----- model cards and configs of the shipped checkpoints -------------------------------------------------
 def test_shipped_configs_and_model_cards_are_as_published():
-    from lerobot_predvla.experiments.headline import stale_checkpoint_files
+    from lerobot_predvla.report.headline import stale_checkpoint_files
 
     assert stale_checkpoint_files(REPO) == {}, "run `predvla report --docs` and commit checkpoints/"
 

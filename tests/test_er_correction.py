@@ -1,12 +1,11 @@
-"""`predvla er-correction`: error regression's correction before the grasp against the expert's deviation. The
-arithmetic on hand-made traces; the expert's approach on the simulator (physics only)."""
+"""`python -m research.er_correction`: error regression's correction before the grasp against the expert's
+deviation. The arithmetic on hand-made traces; the expert's approach on the simulator (physics only)."""
 
 import numpy as np
 import pytest
 from trace_factory import raw_actions, trace_checkpoint, write_trace
 
-from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments import er_correction as ec
+from research import er_correction as ec
 
 
 @pytest.fixture
@@ -50,7 +49,7 @@ def test_traces_are_unnormalised_and_a_correction_that_follows_the_expert_has_sl
     assert np.allclose(summary["per_task"]["3"]["correction_mean"], bias + 0.5 * deviations.mean(axis=0))
     assert np.allclose(summary["per_task"]["3"]["slope"], 0.5) and np.allclose(summary["per_task"]["3"]["r"], 1.0)
 
-    report = ec.write_report(tmp_path / "out", [task], {3: expert}, ["predvla er-correction ..."])
+    report = ec.write_report(tmp_path / "out", [task], {3: expert}, ["python -m research.er_correction ..."])
     assert (tmp_path / "out" / ec.FIGURE).stat().st_size > 0
     assert report["summary"]["episodes"] == 5 and "| 3 |" in (tmp_path / "out" / ec.REPORT_MD).read_text()
 
@@ -85,7 +84,7 @@ def test_the_command_refuses_mismatched_traces_before_running_the_expert(tmp_pat
     }
     for argv, message in cases.items():
         args = [a if a.startswith("--") else str(tmp_path / a) for a in argv]
-        assert predvla_main(["er-correction", *args, "--out", str(tmp_path / "out")]) == 2
+        assert ec.main([*args, "--out", str(tmp_path / "out")]) == 2
         assert message in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
 

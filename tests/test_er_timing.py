@@ -1,5 +1,5 @@
-"""`predvla er-timing`: error regression's lift step against the exact open loop's, and the outcomes, on hand-made
-traces."""
+"""`python -m research.er_timing`: error regression's lift step against the exact open loop's, and the outcomes, on
+hand-made traces."""
 
 import json
 
@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 from trace_factory import raw_actions, trace_checkpoint, write_trace
 
-from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments import er_timing as et
+from research import er_timing as et
 
 
 def lifting(close_at: int, lift_at: int, steps: int = 14) -> np.ndarray:
@@ -48,9 +47,9 @@ def test_the_lift_is_the_first_rise_after_the_close():
 
 def test_early_lifts_that_fail_are_found_and_tested(traces, capsys):
     out = traces / "out"
-    argv = ["er-timing", "--trace", str(traces / "er"), "--open-loop", str(traces / "ol"),
+    argv = ["--trace", str(traces / "er"), "--open-loop", str(traces / "ol"),
             "--outcomes", str(traces / "full" / "eval_info.json"), "--test-states", "0-5", "--out", str(out)]
-    assert predvla_main(argv) == 0
+    assert et.main(argv) == 0
     report = json.loads((out / et.REPORT_JSON).read_text())
     assert report["open_loop"] == {"close": 4, "lift": 8}
     assert [e["lift"] for e in report["episodes"]] == [7, 8, 7, 8, 7, 9]
@@ -70,7 +69,7 @@ def test_early_lifts_that_fail_are_found_and_tested(traces, capsys):
 
 
 def test_without_outcomes_the_traces_own_evaluation_counts(traces):
-    assert predvla_main(["er-timing", "--trace", str(traces / "er"), "--open-loop", str(traces / "ol"),
+    assert et.main(["--trace", str(traces / "er"), "--open-loop", str(traces / "ol"),
                          "--out", str(traces / "out")]) == 0
     report = json.loads((traces / "out" / et.REPORT_JSON).read_text())
     assert all(e["success"] for e in report["episodes"]) and list(report["tests"]) == ["all traced starts"]
@@ -91,6 +90,6 @@ def test_bad_input_is_named_and_nothing_is_written(traces, capsys):
     for extra, message in cases.items():
         args = {"--trace": str(traces / "er"), "--open-loop": str(traces / "ol"), "--out": str(traces / "out")}
         args.update(dict([extra]))
-        assert predvla_main(["er-timing", *[x for kv in args.items() for x in kv]]) == 2, extra
+        assert et.main([*[x for kv in args.items() for x in kv]]) == 2, extra
         assert message in capsys.readouterr().err, extra
     assert not (traces / "out").exists()

@@ -1,8 +1,8 @@
-"""`python -m lerobot_predvla.experiments.faults`: the fault-injection table of docs/reliability.md."""
+"""`python -m lerobot_predvla.report.faults`: the fault-injection table of docs/reliability.md."""
 
 import json
 
-from lerobot_predvla.experiments.faults import main
+from lerobot_predvla.report.faults import main
 
 
 def eval_info(path, successes, faults):

@@ -18,13 +18,13 @@ import torch
 
 from lerobot_predvla import PredVLAPolicy
 from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments.report import write_report
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.pca import PCABasis
 from lerobot_predvla.frontend.preprocessing import PreprocessingSpec
 from lerobot_predvla.frontend.vision import VisionWeights
 from lerobot_predvla.hub.card import MINILM_PARAMS, RESNET18_BACKBONE_PARAMS
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
+from lerobot_predvla.report import write_report
 from lerobot_predvla.utils.checkpoints import last_pretrained
 from lerobot_predvla.utils.parameters import count_parameters
 
@@ -247,8 +247,8 @@ def test_every_policy_type_has_its_own_card_section_and_an_unknown_type_is_an_er
 def test_publishing_a_policy_loads_card_and_upload_code_only():
     """What `PredVLAPolicy`'s publishing methods call (`PredVLAPolicy.publishing`: hub/upload.py, with hub/card.py)
     loads neither the experiment runners nor the report."""
-    code = ("import sys, lerobot_predvla.hub.upload; "
-            "print(sorted(m for m in sys.modules if m.startswith('lerobot_predvla.experiments')))")
+    code = ("import sys, lerobot_predvla.hub.upload; print(sorted(m for m in sys.modules "
+            "if m.startswith(('lerobot_predvla.sweep', 'lerobot_predvla.report'))))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert result.stdout.strip() == "[]"
 

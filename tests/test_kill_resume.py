@@ -15,14 +15,14 @@ from pathlib import Path
 import pytest
 from lerobot.utils.constants import CHECKPOINTS_DIR, LAST_CHECKPOINT_LINK, PRETRAINED_MODEL_DIR, TRAINING_STATE_DIR
 
-from lerobot_predvla.experiments.kill_resume import (
+from lerobot_predvla.hub.upload import push_checkpoint
+from lerobot_predvla.sweep.kill_resume import (
     HarnessConfig,
     checkpoint_dir,
     load_through_lerobot,
     run_harness,
     train_command,
 )
-from lerobot_predvla.hub.upload import push_checkpoint
 from lerobot_predvla.utils.checkpoints import (
     kill_point,
     remove_leftovers,

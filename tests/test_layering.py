@@ -1,17 +1,24 @@
-"""The package's shape, read from its imports with `ast`: no import cycle, no import against the layering.
+"""The package's shape, read from its imports with `ast`: no import cycle, no import against the layering, and the
+research diagnostics beside the package, never inside it.
 
 Parts are the top-level modules and folders of `lerobot_predvla`; a policy folder under `policies/` and a simulator
 folder under `sims/` are parts of their own. `ALLOWED` lists, bottom up, the parts each part may import; `EXCEPTIONS`
 the imports that still run against it, each with its reason (the test fails once one is no longer needed, so the
-list only shrinks).
+list only shrinks). `research/` (the diagnostics behind docs/research/, not installed) may import the package; the
+package never imports it, and whatever the package defines for research it uses itself. No module of either is
+longer than MAX_LINES.
 """
 
 import ast
+import re
 from collections import defaultdict
 from pathlib import Path
 
 PACKAGE = "lerobot_predvla"
+RESEARCH = "research"
 ROOT = Path(__file__).resolve().parents[1] / PACKAGE
+RESEARCH_ROOT = ROOT.parent / RESEARCH
+MAX_LINES = 600
 OWN_PARTS = ("policies", "sims")  # folders whose subfolders are parts of their own
 
 _BASE = {"utils", "columns"}
@@ -36,8 +43,9 @@ ALLOWED = {
     "sims.libero": _BELOW_SIMULATORS,  # the simulator and its LeRobot env type
     "hub": _BELOW_SIMULATORS | _SIMULATORS,
     "lerobot_integration": _BELOW_SIMULATORS | _SIMULATORS,
-    "experiments": _BELOW_SIMULATORS | _SIMULATORS | {"hub"},
-    "cli": _BELOW_SIMULATORS | _SIMULATORS | {"hub", "experiments"},
+    "sweep": _BELOW_SIMULATORS | _SIMULATORS,  # the sweep runner: data, lerobot-train, lerobot-eval, run records
+    "report": _BELOW_SIMULATORS | _SIMULATORS | {"hub", "sweep"},  # reports of sweeps, the headline, model cards
+    "cli": _BELOW_SIMULATORS | _SIMULATORS | {"hub", "sweep", "report"},
 }
 # (importing module, imported part): why the import runs against ALLOWED for now.
 EXCEPTIONS: dict[tuple[str, str], str] = {}
@@ -148,3 +156,51 @@ def test_function_level_imports_of_the_package_are_few_and_say_why():
         lines = MODULES[module].read_text().splitlines()
         statement, above = lines[line - 1], lines[line - 2].strip()
         assert "#" in statement or above.startswith("#"), f"{module}:{line}: say why this import waits for its call"
+
+
+def absolute_imports(path: Path) -> list[tuple[str, list[str]]]:
+    """(imported module, imported names) of every absolute import statement of `path`."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found += [(alias.name, []) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            found.append((node.module, [alias.name for alias in node.names]))
+    return found
+
+
+def test_the_package_never_imports_research():
+    """`research/` is not installed: an import of it from the package would fail on every user's machine."""
+    against = [f"{path.relative_to(ROOT.parent)}: {module}" for path in ROOT.rglob("*.py")
+               for module, names in absolute_imports(path)
+               if module == RESEARCH or module.startswith(RESEARCH + ".")]
+    assert not against, "the package imports research/:\n" + "\n".join(against)
+
+
+def test_what_research_imports_from_the_package_the_package_uses_itself():
+    """Every name `research/` imports from the package is also used by the package (outside the line that defines
+    it): nothing in the installed package is there only for research."""
+    texts = {path: path.read_text() for path in ROOT.rglob("*.py")}
+    unused = []
+    for path in sorted(RESEARCH_ROOT.rglob("*.py")):
+        for module, names in absolute_imports(path):
+            if not module.startswith(PACKAGE + "."):
+                continue
+            for name in names:
+                word = re.compile(rf"\b{re.escape(name)}\b")
+                uses = sum(len(word.findall(text)) for text in texts.values())
+                definitions = sum(len(re.findall(rf"^\s*(?:def |class ){re.escape(name)}\b|^{re.escape(name)}\s*[:=]",
+                                                 text, flags=re.M)) for text in texts.values())
+                if uses - definitions < 1:
+                    unused.append(f"{path.relative_to(ROOT.parent)}: {module}.{name}")
+    assert not unused, "used by research/ only (move them to research/):\n" + "\n".join(unused)
+
+
+def test_research_is_a_tree_beside_the_package():
+    assert (RESEARCH_ROOT / "__init__.py").is_file() and not (ROOT / "experiments").exists()
+
+
+def test_no_module_is_longer_than_max_lines():
+    long = {str(p.relative_to(ROOT.parent)): n for base in (ROOT, RESEARCH_ROOT) for p in sorted(base.rglob("*.py"))
+            if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert not long, f"modules over {MAX_LINES} lines (split them by job): {long}"

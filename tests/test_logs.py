@@ -2,10 +2,10 @@
 
 import sys
 
-from lerobot_predvla.experiments.kill_resume import logged_steps
-from lerobot_predvla.experiments.logs import TrainingRun, compact_log, compact_text, main, training_runs
-from lerobot_predvla.experiments.lr_selection import heldout_losses
-from lerobot_predvla.experiments.sweep import subprocess_executor
+from lerobot_predvla.sweep import subprocess_executor
+from lerobot_predvla.sweep.kill_resume import logged_steps
+from lerobot_predvla.sweep.logs import TrainingRun, compact_log, compact_text, main, training_runs
+from lerobot_predvla.sweep.lr_selection import heldout_losses
 
 TRAIN_STEP = "INFO 2026-11-26 15:04:59 ot_train.py:641 step:9 smpl:291 ep:2K loss:-14.459 grdn:17.435"
 EVAL_LOSS = "INFO 2026-11-26 15:05:01 ot_train.py:702 step 9: eval_loss=0.5120"

@@ -1,4 +1,4 @@
-"""Learning-rate selection on held-out demonstrations (`lr_sweep`, experiments/lr_selection.py): the plan and the
+"""Learning-rate selection on held-out demonstrations (`lr_sweep`, sweep/lr_selection.py): the plan and the
 resumable stages with a fake `lerobot-train`, and the real selection through LeRobot's `--dataset.eval_split`."""
 
 import json
@@ -9,7 +9,9 @@ import torch
 import yaml
 from safetensors.torch import save_file
 
-from lerobot_predvla.experiments.lr_selection import (
+from lerobot_predvla.policies.common.training_guard import NONFINITE_STOP
+from lerobot_predvla.sweep import TRAIN_DONE_FILE, Run, Runner, Sweep, SweepError, subprocess_executor
+from lerobot_predvla.sweep.lr_selection import (
     PENDING_LR,
     LRSweep,
     candidate_path,
@@ -17,8 +19,6 @@ from lerobot_predvla.experiments.lr_selection import (
     heldout_losses,
     selection_path,
 )
-from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE, Run, Runner, Sweep, SweepError, subprocess_executor
-from lerobot_predvla.policies.common.training_guard import NONFINITE_STOP
 
 SUITE = "libero_object"
 
@@ -95,7 +95,7 @@ def test_the_lowest_heldout_loss_wins_and_every_stage_is_skipped_once_done(tmp_p
     fake = FakeTrainer({1e-4: -1.5, 1e-3: -2.25, 1e-2: "diverge"})
     runner = Runner(Sweep.load(sweep_file(tmp_path, eval_every=5)), tmp_path / "runs", execute=fake)
     with pytest.MonkeyPatch.context() as patch:  # the fake has no dataset to read the held-out episodes from
-        patch.setattr("lerobot_predvla.experiments.sweep.training.heldout_episodes", lambda *a: {"task": [3]})
+        patch.setattr("lerobot_predvla.sweep.training.heldout_episodes", lambda *a: {"task": [3]})
         outcome = runner.run(progress=False)
     assert outcome["done"] == ["B2/libero_object/seed0", "B2/libero_object/seed1"], outcome
     selection = json.loads(selection_path(tmp_path / "runs", "B2", SUITE).read_text())

@@ -1,4 +1,4 @@
-"""Error regression's mechanism on a task only observations can solve (experiments/mechanism.py).
+"""Error regression's mechanism on a task only observations can solve (research/mechanism.py).
 
 One instruction, four targets whose identity only the visual features carry: exact open loop is at chance by
 construction. A small `PredVLAPolicy` is trained with Table 2's readings (its own forward, posterior store and update)
@@ -19,11 +19,11 @@ import json
 import pytest
 import torch
 
-from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.cli.mechanism import reading
-from lerobot_predvla.experiments.mechanism import (
+from research.mechanism import (
     ReachTask,
     follows_swapped_posteriors,
+    main,
+    reading,
     rollout,
     success_rate,
     task_config,
@@ -110,8 +110,7 @@ def test_the_command_records_where_its_numbers_were_made(tmp_path):
     """Training's arithmetic differs between installations, so `--out` keeps the versions, commit and machine beside
     every row, with the training seed."""
     out = tmp_path / "mechanism.json"
-    assert predvla_main(["mechanism", "--steps", "2", "--episodes-per-target", "1", "--seed", "3",
-                         "--out", str(out)]) == 0
+    assert main(["--steps", "2", "--episodes-per-target", "1", "--seed", "3", "--out", str(out)]) == 0
     record = json.loads(out.read_text())
     assert record["seed"] == 3 and record["steps"] == 2
     recorded = set(record["versions"])

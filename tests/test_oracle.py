@@ -173,9 +173,9 @@ def expert_hdf5(tmp_path_factory):
 def test_convert_oracle_writes_standardised_poses_and_no_camera(expert_hdf5, frontend_dir, tmp_path):
     """`predvla convert --oracle`: the poses replayed from each demonstration's saved states, standardised."""
     from lerobot_predvla.data.libero_hdf5 import scan_file
-    from lerobot_predvla.experiments.oracle_probe import run_probe
     from lerobot_predvla.sims.libero import env as libero_env
     from lerobot_predvla.sims.libero.oracle import demo_object_poses
+    from research.oracle_probe import run_probe
 
     root, spec = expert_hdf5
     out = tmp_path / "dataset"

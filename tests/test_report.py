@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments.report import FIGURES, MISSING, load_summary, write_report
-from lerobot_predvla.experiments.report.sections import INSPECT_DIR, START_SPREAD_FILE, _relative
-from lerobot_predvla.experiments.sweep import ConfigSpec
+from lerobot_predvla.report import FIGURES, MISSING, load_summary, write_report
+from lerobot_predvla.report.sections import INSPECT_DIR, START_SPREAD_FILE, _relative
+from lerobot_predvla.sweep import ConfigSpec
 from lerobot_predvla.utils.io import atomic_write_json
 
 SUITES4 = ("libero_spatial", "libero_goal", "libero_object", "libero_10")
@@ -164,7 +164,7 @@ def write_eval_info(path: Path, successes: dict[int, list[bool]]) -> None:
 
 def test_compared_runs_are_paired_episode_by_episode(tmp_path):
     """Discordant episode pairs and the exact sign test, over the seeds whose runs share their starts."""
-    from lerobot_predvla.experiments.report import sign_test
+    from lerobot_predvla.report import sign_test
 
     runs = tmp_path / "runs"
     outcomes = {  # (config, seed) -> per task, per episode
@@ -204,7 +204,7 @@ def test_compared_runs_are_paired_episode_by_episode(tmp_path):
 def test_the_per_task_ablation_figure_compares_the_same_episodes(tmp_path):
     """An ablation run on the first 2 of the intact model's 4 episodes per task: its per-task change is taken on
     those 2 pairs, not against the intact model's rate over all 4."""
-    from lerobot_predvla.experiments.report import paired_task_rates
+    from lerobot_predvla.report import paired_task_rates
 
     runs = tmp_path / "runs"
     outcomes = {"er": {0: [True, False, True, True], 1: [False, False, True, True]},
@@ -277,7 +277,7 @@ def test_pooled_configurations_gather_their_seeds_and_paired_episodes(tmp_path):
 
 
 def test_a_seed_in_two_pooled_configurations_is_an_error(tmp_path):
-    from lerobot_predvla.experiments.report import ReportError
+    from lerobot_predvla.report import ReportError
 
     runs = tmp_path / "runs"
     for config, pool_with in (("er", None), ("er_seeds", "er")):
@@ -289,7 +289,7 @@ def test_a_seed_in_two_pooled_configurations_is_an_error(tmp_path):
 
 
 def test_runs_share_their_starts_only_with_the_same_seed_and_resets():
-    from lerobot_predvla.experiments.report import same_starts
+    from lerobot_predvla.report import same_starts
 
     official = {"eval_seed": 0, "init_states": True, "episode_length": 280, "n_episodes_per_task": 10}
     assert same_starts(official, {**official, "n_episodes_per_task": 20})  # episode i: official init state i
@@ -389,8 +389,8 @@ def test_fresh_clone_section_names_what_is_read_and_what_is_redone(tmp_path, mon
     """A training whose record names a model outside the runs dir's train/ is read from there; one whose checkpoint
     lies in train/ is redone, unless it is a learning-rate candidate whose held-out result is committed; data stages
     are recomputed, with their recorded time."""
-    from lerobot_predvla.experiments.report import fresh_clone_section
-    from lerobot_predvla.experiments.sweep import TRAIN_DONE_FILE
+    from lerobot_predvla.report import fresh_clone_section
+    from lerobot_predvla.sweep import TRAIN_DONE_FILE
 
     monkeypatch.chdir(tmp_path)
     runs = tmp_path / "results" / "x" / "runs"
@@ -421,7 +421,7 @@ def test_fresh_clone_section_names_what_is_read_and_what_is_redone(tmp_path, mon
 def test_training_time_counts_every_call_in_the_training_log(tmp_path):
     """A resumed training's record times its last lerobot-train call; the stage table sums the calls in its log,
     for the run that trained and for one evaluating its checkpoint; without a log, the record's time stands."""
-    from lerobot_predvla.experiments.report import stages_section
+    from lerobot_predvla.report import stages_section
 
     log = tmp_path / "logs" / "predvla" / "libero_object" / "seed0.train.log"
     log.parent.mkdir(parents=True)

@@ -131,7 +131,7 @@ def test_lerobot_rollout_drives_the_replay_robot(so101, tmp_path):
 @pytest.mark.slow  # trains with lerobot-train, runs lerobot-rollout
 def test_robot_dry_run_runs_as_written(tmp_path):
     """docs/robot.md's first commands, as written, in an empty folder (nothing of the repository's but the plugin):
-    `predvla robot-example` makes the recording and checkpoint, `lerobot-rollout` plays two episodes on the replay
+    `predvla demo robot` makes the recording and checkpoint, `lerobot-rollout` plays two episodes on the replay
     robot; the compiled loops are ready before the first tick, and the action log tells the policy's actions from
     LeRobot's own moves between episodes."""
     page = (Path(__file__).resolve().parents[1] / "docs" / "robot.md").read_text()

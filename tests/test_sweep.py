@@ -14,9 +14,8 @@ from safetensors.torch import save_file
 from sweep_factory import FakeData, FakeLeRobot, arg, cli_flags, sweep_file
 
 from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments.eval_info import EvalInfoError, parse_eval_info
-from lerobot_predvla.experiments.report import write_report
-from lerobot_predvla.experiments.sweep import (
+from lerobot_predvla.report import write_report
+from lerobot_predvla.sweep import (
     TRAIN_DONE_FILE,
     Run,
     Runner,
@@ -24,6 +23,7 @@ from lerobot_predvla.experiments.sweep import (
     SweepError,
     parse_shard,
 )
+from lerobot_predvla.sweep.eval_info import EvalInfoError, parse_eval_info
 from lerobot_predvla.utils.manifest import sha256_file
 from lerobot_predvla.utils.versions import machine
 

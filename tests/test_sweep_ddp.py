@@ -14,7 +14,7 @@ import torch.multiprocessing as mp
 from safetensors.torch import load_file, save_file
 from sweep_factory import FakeLeRobot, arg, sweep_file
 
-from lerobot_predvla.experiments.sweep import (
+from lerobot_predvla.sweep import (
     TRAIN_DONE_FILE,
     Run,
     Runner,

@@ -8,7 +8,7 @@ import pytest
 from sweep_factory import FakeLeRobot, arg, differing_flags, sweep_file
 
 from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments.sweep import (
+from lerobot_predvla.sweep import (
     Run,
     Runner,
     Sweep,

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from lerobot_predvla.cli.main import main as predvla_main
-from lerobot_predvla.experiments.sweep import Runner, Sweep
+from lerobot_predvla.sweep import Runner, Sweep
 
 REPO = Path(__file__).resolve().parents[1]
 SWEEP = REPO / "configs" / "sweeps" / "libero_object_table2.yaml"

@@ -1,5 +1,5 @@
 """Hand-made `predvla trace` directories and the checkpoint postprocessor they are read with (the tests of
-`predvla er-correction` and `predvla er-timing`)."""
+`research.er_correction` and `research.er_timing`)."""
 
 import json
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""`predvla libero-demo`: the main job end to end on the LIBERO simulator, offline (CPU by default).
+"""`predvla demo libero`: the main job end to end on the LIBERO simulator, offline (CPU by default).
 
 Stages (each is skipped when its output already exists, so a killed run resumes):
 1. scripted-expert demonstrations (`predvla demos`),
@@ -20,9 +20,9 @@ import time
 from pathlib import Path
 
 from lerobot_predvla.cli.demos import task_ids
-from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, success_rates
 from lerobot_predvla.lerobot_commands import PREDVLA, eval_command, policy_args, train_command
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
+from lerobot_predvla.sweep.eval_info import EVAL_INFO_FILE, success_rates
 from lerobot_predvla.utils.checkpoints import last_pretrained
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json
 
@@ -32,7 +32,7 @@ SUITE_CHECKPOINT = Path("checkpoints/predvla_libero_object")  # trained on all t
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("libero-demo", help="demos -> front end -> convert -> train -> eval on LIBERO",
+    p = subparsers.add_parser("libero", help="demos -> front end -> convert -> train -> eval on LIBERO",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", type=Path, default=Path("outputs/libero_demo"), help="output directory")
     p.add_argument("--suite", default="libero_object", help="LIBERO suite")

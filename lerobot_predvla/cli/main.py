@@ -1,43 +1,39 @@
 """The `predvla` console command: one entry point, one module per subcommand.
 
 Each subcommand module exposes `add_parser(subparsers)` which registers its parser and sets
-`func` to a callable taking the parsed namespace and returning an exit code.
+`func` to a callable taking the parsed namespace and returning an exit code. `predvla --help` lists the
+subcommands by job (`JOBS`). The research diagnostics behind docs/research/ are not subcommands: they run from a
+checkout as `python -m research.<name>`.
 """
 
 import argparse
 import importlib
 import sys
 
-# Subcommand modules, in the order `predvla --help` lists them.
-SUBCOMMAND_MODULES = [
-    "lerobot_predvla.cli.libero_demo",
-    "lerobot_predvla.cli.synthetic",
-    "lerobot_predvla.cli.demos",
-    "lerobot_predvla.cli.blind_replay",
-    "lerobot_predvla.cli.fit_frontend",
-    "lerobot_predvla.cli.convert",
-    "lerobot_predvla.cli.features_only",
-    "lerobot_predvla.cli.inspect",
-    "lerobot_predvla.cli.mechanism",
-    "lerobot_predvla.cli.trace",
-    "lerobot_predvla.cli.er_correction",
-    "lerobot_predvla.cli.er_timing",
-    "lerobot_predvla.cli.divergence",
-    "lerobot_predvla.cli.oracle_probe",
-    "lerobot_predvla.cli.sweep",
-    "lerobot_predvla.cli.report",
-    "lerobot_predvla.cli.push",
-    "lerobot_predvla.cli.bench",
-    "lerobot_predvla.cli.build",
-    "lerobot_predvla.cli.robot_example",
-]
+# Subcommand modules by job, in the order `predvla --help` lists them.
+JOBS = {
+    "data": ["demos", "blind_replay", "fit_frontend", "convert", "features_only"],
+    "train and evaluate": ["demo", "sweep", "build"],
+    "publish": ["report", "push"],
+    "diagnose": ["inspect", "trace", "bench"],
+}
+SUBCOMMAND_MODULES = [f"lerobot_predvla.cli.{name}" for names in JOBS.values() for name in names]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="predvla", description=__doc__.splitlines()[0])
-    subparsers = parser.add_subparsers(dest="command", required=True)
-    for name in SUBCOMMAND_MODULES:
-        importlib.import_module(name).add_parser(subparsers)
+    parser = argparse.ArgumentParser(prog="predvla", description=__doc__.splitlines()[0],
+                                     usage="predvla [-h] COMMAND ...")
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", help=argparse.SUPPRESS,
+                                       prog="predvla")
+    listed = 0
+    for job, names in JOBS.items():
+        for name in names:
+            importlib.import_module(f"lerobot_predvla.cli.{name}").add_parser(subparsers)
+        # argparse lists a subparsers action's commands in one block; these lines move the commands just
+        # registered into a help section of their own job.
+        group = parser.add_argument_group(job)
+        group._group_actions.extend(subparsers._choices_actions[listed:])
+        listed = len(subparsers._choices_actions)
     return parser
 
 

@@ -8,9 +8,9 @@ from pathlib import Path
 
 from huggingface_hub.errors import HfHubHTTPError, OfflineModeIsEnabled
 
-from lerobot_predvla.experiments.report import SUMMARY_FILE, load_summary
 from lerobot_predvla.hub.card import HubError, report_results
 from lerobot_predvla.hub.upload import push_checkpoint
+from lerobot_predvla.report import SUMMARY_FILE, load_summary
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:

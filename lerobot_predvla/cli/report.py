@@ -6,8 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from lerobot_predvla.experiments.headline import README, RESULTS_DOC, update_docs
-from lerobot_predvla.experiments.report import REPORT_FILE, ReportError, write_report
+from lerobot_predvla.report import REPORT_FILE, ReportError, write_report
+from lerobot_predvla.report.headline import README, RESULTS_DOC, update_docs
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:

@@ -1,4 +1,4 @@
-"""`predvla robot-example`: a tiny SO-101 recording and a PredVLA checkpoint trained on it, for the robot dry run.
+"""`predvla demo robot`: a tiny SO-101 recording and a PredVLA checkpoint trained on it, for the robot dry run.
 
 Writes, under `--out` (default `outputs`, which git ignores):
 
@@ -28,7 +28,7 @@ REPO_ID = "local/so101_recordings"
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("robot-example", help="a tiny SO-101 recording and a checkpoint for the dry run",
+    parser = subparsers.add_parser("robot", help="a tiny SO-101 recording and a checkpoint for the dry run",
                                    description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("outputs"), help="where to write (default: outputs)")
     parser.add_argument("--steps", type=int, default=2, help="lerobot-train steps (default 2)")
@@ -41,11 +41,11 @@ def run(args: argparse.Namespace) -> int:
                                               ("so101_recordings", "so101_frontend", "so101_predvla", "predvla_so101"))
     checkpoint = last_pretrained(train)
     if checkpoint.is_dir():
-        print(f"predvla robot-example: {checkpoint} is there already; remove {train} to train it again.")
+        print(f"predvla demo robot: {checkpoint} is there already; remove {train} to train it again.")
         return 0
     present = [str(p) for p in (recordings, frontend, converted, train) if p.exists()]
     if present:
-        print(f"predvla robot-example: {', '.join(present)} exist(s) from an unfinished run; remove them and run "
+        print(f"predvla demo robot: {', '.join(present)} exist(s) from an unfinished run; remove them and run "
               "again.")
         return 2
     make_dataset(recordings, SO101, EPISODES, repo_id=REPO_ID)
@@ -66,5 +66,5 @@ def run(args: argparse.Namespace) -> int:
     print("$", " ".join(cmd), flush=True)
     if subprocess.run(cmd, env={**os.environ, "HF_HUB_OFFLINE": "1"}).returncode != 0:
         return 1
-    print(f"predvla robot-example: recording {recordings}, checkpoint {checkpoint}")
+    print(f"predvla demo robot: recording {recordings}, checkpoint {checkpoint}")
     return 0

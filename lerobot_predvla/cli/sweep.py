@@ -5,7 +5,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from lerobot_predvla.experiments.sweep import Runner, Sweep, SweepError, parse_shard
+from lerobot_predvla.sweep import Runner, Sweep, SweepError, parse_shard
 
 
 def _ints(text: str) -> list[int]:

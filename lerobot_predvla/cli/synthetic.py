@@ -1,4 +1,4 @@
-"""`predvla synthetic-demo`: the offline end-to-end job on a generated dataset (no simulator).
+"""`predvla demo synthetic`: the offline end-to-end job on a generated dataset (no simulator).
 
 Generates a small dataset with PredVLA's cached columns, trains with the real `lerobot-train`, then
 replays held-in episodes through the checkpoint's processors and policy, once with error regression and
@@ -25,7 +25,7 @@ BANNER = "=" * 78
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("synthetic-demo", help="train and replay PredVLA on a generated dataset")
+    p = subparsers.add_parser("synthetic", help="train and replay PredVLA on a generated dataset")
     p.add_argument("--out", type=Path, default=Path("outputs/synthetic_demo"), help="output directory")
     p.add_argument("--steps", type=int, default=300, help="lerobot-train steps")
     p.add_argument("--batch-size", type=int, default=8)

@@ -1,5 +1,5 @@
 """Tiny LeRobot v3 datasets built with LeRobot's own API, in two robots' layouts: the tests' datasets and the
-recording of `predvla robot-example`.
+recording of `predvla demo robot`.
 
 - LIBERO community layout: 8-dim end-effector state (eef pos 3 + axis-angle 3 + gripper 2), cameras
   `observation.images.image` and `observation.images.image2`, 7-dim actions, 10 fps.

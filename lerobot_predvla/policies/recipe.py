@@ -1,6 +1,6 @@
 """A policy config's recipe: the fields that change what is computed, and how a config departs from its defaults.
 
-Used by the model card (hub/card.py), the headline table (experiments/headline.py) and the sweep runner.
+Used by the model card (hub/card.py), the headline table (report/headline.py) and the sweep runner.
 """
 
 from dataclasses import MISSING, dataclass, fields

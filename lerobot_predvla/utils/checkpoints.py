@@ -12,7 +12,7 @@ their place inside `lerobot-train` by `lerobot_predvla.lerobot_integration`) mak
 
 A kill at any moment leaves `last` pointing at a complete checkpoint (or absent before the first one).
 `PREDVLA_KILL_AT=<point>@<step>` kills the process group at a named point of the checkpoint of that step
-(`KILL_POINTS`): a deterministic test hook for the fault-injection harness (experiments/kill_resume.py).
+(`KILL_POINTS`): a deterministic test hook for the fault-injection harness (sweep/kill_resume.py).
 """
 
 import logging

@@ -3,21 +3,16 @@
 Each policy folder's `processor_<type>.py` gives LeRobot its `make_<type>_pre_post_processors` from this one.
 """
 
-from pathlib import Path
 from typing import Any
 
 import torch
 from lerobot.processor import PolicyAction, PolicyProcessorPipeline
-from lerobot.processor.converters import policy_action_to_transition, transition_to_policy_action
 from lerobot.processor.factory import make_default_policy_processor_steps, make_policy_processor_pipelines
-from lerobot.utils.constants import POLICY_POSTPROCESSOR_DEFAULT_NAME
 
 from lerobot_predvla.columns import OBS_VISION_FEATURES
 from lerobot_predvla.frontend.artefact import FrontendArtefact, FrontendArtefactError
 from lerobot_predvla.frontend.processor_step import FrontendProcessorStep
 from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
-
-POSTPROCESSOR_FILE = f"{POLICY_POSTPROCESSOR_DEFAULT_NAME}.json"  # as LeRobot saves it beside the weights
 
 
 def frontend_step(config: CachedFeaturesConfig) -> FrontendProcessorStep:
@@ -68,9 +63,3 @@ def make_cached_features_pre_post_processors(
         output_steps=[s.unnormalize, s.to_cpu],
     )
 
-
-def load_postprocessor(checkpoint: Path) -> PolicyProcessorPipeline[PolicyAction, PolicyAction]:
-    """A checkpoint's saved output pipeline (`POSTPROCESSOR_FILE`): model actions in, raw actions out."""
-    return PolicyProcessorPipeline.from_pretrained(
-        checkpoint, POSTPROCESSOR_FILE, to_transition=policy_action_to_transition,
-        to_output=transition_to_policy_action)

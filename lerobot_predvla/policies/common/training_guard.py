@@ -19,7 +19,7 @@ import torch
 from torch import Tensor, nn
 
 # The stop message's fixed part: `predvla sweep` finds it in a training log to tell a diverged learning rate from
-# a crash (experiments/lr_selection.py).
+# a crash (sweep/lr_selection.py).
 NONFINITE_STOP = "stopped before any weight, posterior or checkpoint became non-finite"
 
 

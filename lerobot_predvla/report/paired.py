@@ -1,0 +1,108 @@
+"""Paired episodes: a configuration with `compare_to` (e.g. exact open loop against error regression) is compared
+episode by episode, from the runs' `eval_info.json` files. Both runs of a seed start from the same init states when
+they share the evaluation seed, reset mode and protocol, so each episode is a pair; the report counts the pairs that
+succeed in only one of the two and gives the exact two-sided sign test on them. Two runs that load one checkpoint
+path pair only when they evaluated the same weights (`same_model`). A pool (`pool_with`) gets one sign test over all
+its configurations' pairs."""
+
+from collections.abc import Iterable
+from pathlib import Path
+
+from lerobot_predvla.report.results import run_episodes
+from lerobot_predvla.utils.statistics import percent, sign_test
+
+PAIRING_KEYS = ("eval_seed", "init_states", "episode_length")
+
+
+def same_starts(a: dict, b: dict) -> bool:
+    """Whether episode i of a task starts from the same state in both runs. From the official init states episode
+    i starts from init state i whatever the number of episodes; randomised resets also need the same number."""
+    return all(a.get(k) == b.get(k) for k in PAIRING_KEYS) and (
+        a.get("init_states") is not False or a.get("n_episodes_per_task") == b.get("n_episodes_per_task")
+    )
+
+
+def same_model(a: dict, b: dict) -> bool:
+    """Whether two runs that load one checkpoint path evaluated the same weights: a training redone in place (its
+    checkpoint lost) writes new weights under the old path. Runs of different checkpoints (a baseline against
+    PredVLA) compare different models on purpose; records written before `model_sha256` existed pair only with
+    each other."""
+    return a.get("checkpoint") != b.get("checkpoint") or a.get("model_sha256") == b.get("model_sha256")
+
+
+PAIR_COUNTS = ("pairs", "successes", "against_successes", "only", "only_against")  # of a set of episode pairs
+
+
+def sum_counts(parts: Iterable[dict[str, int]]) -> dict[str, int]:
+    """PAIR_COUNTS summed over several sets of episode pairs (tasks, or the configurations of a pool)."""
+    return {count: sum(part[count] for part in parts) for count in PAIR_COUNTS}
+
+
+def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
+    """Add `episodes` (per suite: pairs, successes, discordant counts, sign test) to every `compare_to` entry."""
+    by_run = {(r["config"], r["suite"], int(r["seed"])): r for r in records}
+    for name, entry in summary["configs"].items():
+        against = entry.get("compare_to")
+        if not against:
+            continue
+        for suite in summary["suites"]:
+            comparable = sorted(
+                seed
+                for (c, s, seed), r in by_run.items()
+                if c == name
+                and s == suite
+                and (against, suite, seed) in by_run
+                and same_starts(r, by_run[(against, suite, seed)])
+            )
+            seeds = [
+                seed for seed in comparable if same_model(by_run[(name, suite, seed)], by_run[(against, suite, seed)])
+            ]
+            summary.setdefault("unpaired", []).extend(
+                {"config": name, "against": against, "suite": suite, "seed": seed}
+                for seed in comparable
+                if seed not in seeds
+            )
+            tasks: dict[str, dict[str, int]] = {}  # task -> PAIR_COUNTS over its paired episodes
+            for seed in seeds:
+                mine, theirs = (run_episodes(runs_dir, c, suite, seed) for c in (name, against))
+                for key in mine.keys() & theirs.keys():
+                    a, b = mine[key], theirs[key]
+                    task = tasks.setdefault(key[0], dict.fromkeys(PAIR_COUNTS, 0))
+                    for count, value in zip(PAIR_COUNTS, (1, a, b, a and not b, b and not a), strict=True):
+                        task[count] += value
+            if tasks:
+                counts = sum_counts(tasks.values())
+                entry.setdefault("episodes", {})[suite] = {
+                    "against": against,
+                    "seeds": seeds,
+                    **counts,
+                    "sign_test_p": sign_test(counts["only"], counts["only_against"]),
+                    "tasks": dict(sorted(tasks.items(), key=lambda item: int(item[0]))),
+                }
+    for pool in summary.get("pooled", {}).values():
+        for suite in summary["suites"]:
+            parts = [e for name in pool["configs"] if (e := summary["configs"][name].get("episodes", {}).get(suite))]
+            if len(parts) < 2:  # one configuration's pairs are already in the table as they are
+                continue
+            counts = sum_counts(parts)
+            pool.setdefault("episodes", {})[suite] = {
+                "against": " + ".join(e["against"] for e in parts),
+                "seeds": sorted(seed for e in parts for seed in e["seeds"]),
+                **counts,
+                "sign_test_p": sign_test(counts["only"], counts["only_against"]),
+            }
+
+
+def paired_task_rates(summary: dict, config: str, reference: str, suite: str) -> dict[str, tuple[float, float]] | None:
+    """Per task, (reference's success, config's change) in % over the episodes both ran from the same starts
+    (`paired_episodes`); None when the two have no paired episodes in the suite."""
+    paired = summary["configs"].get(config, {}).get("episodes", {}).get(suite)
+    if not paired or paired["against"] != reference:
+        return None
+    return {
+        task: (
+            percent(t["against_successes"], t["pairs"]),
+            percent(t["successes"] - t["against_successes"], t["pairs"]),
+        )
+        for task, t in paired["tasks"].items()
+    }

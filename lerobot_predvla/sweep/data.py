@@ -1,0 +1,167 @@
+"""The data stages of a sweep: a suite's dataset made before its first training, from the sweep file's `data`
+entry (`predvla demos`, `predvla fit-frontend`, `predvla convert`) and its `train_root` copy without camera frames
+(`predvla features-only`). Each stage is skipped once its output exists, so a killed sweep resumes."""
+
+import json
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from itertools import groupby
+from pathlib import Path
+
+from lerobot_predvla.lerobot_commands import PREDVLA
+from lerobot_predvla.sims.libero.env import num_tasks, task_spec
+from lerobot_predvla.sims.libero.hdf5_layout import task_file
+from lerobot_predvla.sweep.layout import data_stages_path
+from lerobot_predvla.sweep.spec import DataSpec
+from lerobot_predvla.sweep.workspace import Workspace
+from lerobot_predvla.utils.io import atomic_write_json
+
+
+class DataStages(Workspace):
+    """Makes the datasets a sweep trains on."""
+
+    def data_commands(self, suite: str) -> list[tuple[str, list[str]]]:
+        """(stage, command) still to run to make `suite`'s datasets: its `root` from the `data` entry, then its
+        `train_root` copy without camera frames; empty when they exist (or nothing says how to make them)."""
+        entry = self.sweep.settings.datasets[suite]
+        commands = self.source_data_commands(suite)
+        train_root = self.train_root(suite)
+        if train_root and not (train_root / "meta" / "info.json").is_file():
+            commands.append(
+                (
+                    "features_only",
+                    [
+                        *PREDVLA,
+                        "features-only",
+                        "--dataset-root",
+                        str(self.sweep_path(entry["root"])),
+                        "--out",
+                        str(train_root),
+                        "--repo-id",
+                        entry["repo_id"],
+                    ],
+                )
+            )
+        return commands
+
+    def source_data_commands(self, suite: str) -> list[tuple[str, list[str]]]:
+        """(stage, command) still to run to make `suite`'s `root` dataset from its `data` entry."""
+        spec = self.sweep.settings.data.get(suite)
+        if spec is None:
+            return []
+        dataset = self.sweep_path(self.sweep.settings.datasets[suite]["root"])
+        if (dataset / "meta" / "info.json").is_file():
+            return []
+        hdf5, frontend = self.sweep_path(spec.hdf5), self.sweep_path(spec.frontend)
+        commands = []
+        missing = self.missing_demo_tasks(suite, spec, hdf5)
+        shares = [missing[k :: spec.workers] for k in range(min(spec.workers, len(missing)))]
+        for k, share in enumerate(shares):
+            commands.append(
+                (
+                    "demos" if len(shares) == 1 else f"demos.tasks{k}",
+                    [
+                        *PREDVLA,
+                        "demos",
+                        "--suite",
+                        suite,
+                        "--tasks",
+                        ",".join(map(str, share)),
+                        "--per-task",
+                        str(spec.per_task),
+                        "--render-interval",
+                        str(spec.render_interval),
+                        "--seed",
+                        str(spec.demo_seed),
+                        "--init-noise",
+                        str(spec.init_noise),
+                        "--half-turn",
+                        spec.half_turn,
+                        "--hold-steps",
+                        str(spec.hold_steps),
+                        "--out",
+                        str(hdf5),
+                    ],
+                )
+            )
+        if not (frontend / "metadata.json").is_file():
+            commands.append(
+                (
+                    "frontend",
+                    [
+                        *PREDVLA,
+                        "fit-frontend",
+                        "--hdf5-root",
+                        str(hdf5),
+                        "--suites",
+                        suite,
+                        "--vision-weights",
+                        spec.vision_weights,
+                        "--language-from",
+                        spec.language_from,
+                        "--frame-stride",
+                        str(spec.frame_stride),
+                        "--out",
+                        str(frontend),
+                    ],
+                )
+            )
+        commands.append(
+            (
+                "convert",
+                [
+                    *PREDVLA,
+                    "convert",
+                    "--hdf5-root",
+                    str(hdf5),
+                    "--suite",
+                    suite,
+                    "--frontend",
+                    str(frontend),
+                    "--out",
+                    str(dataset),
+                    "--repo-id",
+                    self.sweep.settings.datasets[suite]["repo_id"],
+                    "--image-storage",
+                    spec.image_storage,
+                    *(["--oracle"] if spec.oracle else []),
+                ],
+            )
+        )
+        return commands
+
+    @staticmethod
+    def missing_demo_tasks(suite: str, spec: DataSpec, hdf5: Path) -> list[int]:
+        tasks = spec.tasks if spec.tasks is not None else range(num_tasks(suite))
+        return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]
+
+    def make_data(self, suite: str) -> bool:
+        """Run the missing data stages of `suite` (the `demos.tasks<k>` shares of `data.workers` at once),
+        recording each one's command and wall time in `RUNS_DIR/data/<suite>.json`; False when one failed."""
+        stages_file = data_stages_path(self.runs_dir, suite)
+
+        def run_stage(stage: str, command: list[str]) -> tuple[str, list[str], int, float]:
+            start = time.monotonic()
+            code = self.execute(command, self.log_path("data", suite, 0, stage))
+            return stage, command, code, time.monotonic() - start
+
+        for _, group in groupby(self.data_commands(suite), key=lambda item: item[0].split(".")[0]):
+            group = list(group)
+            with ThreadPoolExecutor(max_workers=len(group)) as pool:
+                finished = list(pool.map(lambda item: run_stage(*item), group))
+            stages = json.loads(stages_file.read_text()) if stages_file.is_file() else {}
+            for stage, command, code, wall in finished:
+                if code == 0:
+                    stages[stage] = {"command": command, "wall_s": round(wall, 1)}
+            atomic_write_json(stages_file, stages)
+            failed = [(stage, code) for stage, _, code, _ in finished if code != 0]
+            for stage, code in failed:
+                print(
+                    f"predvla sweep: data stage {stage} of {suite} failed (exit {code}); see "
+                    f"{self.log_path('data', suite, 0, stage)}",
+                    file=sys.stderr,
+                )
+            if failed:
+                return False
+        return True
