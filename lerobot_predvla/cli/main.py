@@ -14,6 +14,7 @@ SUBCOMMAND_MODULES = [
     "lerobot_predvla.cli.synthetic",
     "lerobot_predvla.cli.demos",
     "lerobot_predvla.cli.blind_replay",
+    "lerobot_predvla.cli.demo_styles",
     "lerobot_predvla.cli.fit_frontend",
     "lerobot_predvla.cli.convert",
     "lerobot_predvla.cli.features_only",
