@@ -126,13 +126,24 @@ def overshoot_vector(start: np.ndarray, end: np.ndarray, mean: float, rng: np.ra
 
 
 class TeleopMotion(Motion):
-    """The motion primitives as a teleoperator executes them; `params` (TeleopParams at the demonstration's
-    diversity), `rng` and `demo_speed` are set by TeleopExpert."""
+    """The motion primitives as a teleoperator executes them; `start_operator` draws the demonstration's operator."""
 
     params: TeleopParams
     rng: np.random.Generator
     demo_speed: float = 1.0
+    start_idle: int = 0
     _grip: float = OPEN  # the gripper command of the last action: an idle step keeps it
+
+    def start_operator(self, params: TeleopParams, seed: int) -> None:
+        """Draw this demonstration's operator from `seed`: its speed factor and the idle steps before it moves
+        (`start_idle`)."""
+        self.params = params
+        self.rng = np.random.default_rng([seed, TELEOP_STREAM])
+        self.demo_speed = 1.0
+        if params.demo_speed_sd > 0:
+            self.demo_speed = float(np.exp(self.rng.normal(0.0, params.demo_speed_sd)))
+            self.speed = float(np.clip(self.demo_speed, params.speed_min, params.speed_max))
+        self.start_idle = int(self.rng.poisson(params.start_idle))
 
     def _action(self, pos: np.ndarray, finger: np.ndarray | None, grip: float, axis: np.ndarray = DOWN,
                 max_speed: float = 1.0) -> np.ndarray:
@@ -203,14 +214,8 @@ class TeleopExpert(TeleopMotion, ScriptedExpert):
     """The scripted expert's plan executed by the teleoperator model; all randomness from `seed` (the episode's)."""
 
     def __init__(self, env, params: TeleopParams, seed: int, half_turn: str = DEFAULT_HALF_TURN) -> None:
-        rng = np.random.default_rng([seed, TELEOP_STREAM])
-        super().__init__(env, rng=rng, half_turn=half_turn)
-        self.params = params
-        self.demo_speed = 1.0
-        if params.demo_speed_sd > 0:
-            self.demo_speed = float(np.exp(rng.normal(0.0, params.demo_speed_sd)))
-            self.speed = float(np.clip(self.demo_speed, params.speed_min, params.speed_max))
-        self.start_idle = int(rng.poisson(params.start_idle))
+        super().__init__(env, half_turn=half_turn)
+        self.start_operator(params, seed)
 
     def _run(self) -> Skill:
         yield from self._idle(self.start_idle)
