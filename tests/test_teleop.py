@@ -128,3 +128,15 @@ def test_params_scale_with_diversity():
     assert TELEOP.at(10.0).regrasp_prob == 1.0
     with pytest.raises(ValueError, match="diversity"):
         TELEOP.at(-0.5)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--diversity", "0.5"], "--diversity 0.5 needs --style teleop"),
+    (["--style", "teleop", "--diversity", "-1"], "--diversity must be >= 0"),
+    (["--placement-spread-cm", "-3"], "--placement-spread-cm must be >= 0"),
+])
+def test_demos_refuses_bad_style_flags(argv, message):
+    from lerobot_predvla.cli.main import main
+
+    with pytest.raises(SystemExit, match=message):
+        main(["demos", "--no-render", *argv])
