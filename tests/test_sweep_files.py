@@ -283,3 +283,30 @@ def test_the_full_scale_reading_run_is_table_2_with_only_the_reading_changed(tmp
             assert getattr(spec, field) == getattr(twin, field), (name, field)
         assert (spec.checkpoint_from, spec.compare_to, spec.pool_with) == tuple(
             ours_of(x) for x in (twin.checkpoint_from, twin.compare_to, twin.pool_with)), name
+
+
+def test_the_demonstration_screens_differ_only_in_their_dataset(tmp_path):
+    """The three screens of docs/research/demonstrations.md: the same policies, modes and evaluation sets; the teleop
+    ones reach `predvla demos` with their style, diversity and placement spread, the scripted one with Table 2's
+    command (no style flags)."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    loaded = {name: Sweep.load(sweeps / f"libero_object_demos_{name}.yaml")
+              for name in ("scripted", "teleop", "teleop_placed")}
+    assert len({tuple(sorted(s.configs)) for s in loaded.values()}) == 1
+    assert len({repr(s.configs) for s in loaded.values()}) == 1
+    commands = {}
+    for name, sweep in loaded.items():
+        spec = sweep.settings.data["libero_object"]
+        spec.hdf5, spec.frontend = str(tmp_path / name / "hdf5"), str(tmp_path / name / "frontend")
+        sweep.settings.datasets["libero_object"]["root"] = str(tmp_path / name / "dataset")
+        commands[name] = dict(Runner(sweep, tmp_path).data_commands("libero_object"))["demos.tasks0"]
+    assert "--style" not in commands["scripted"] and "--placement-spread-cm" not in commands["scripted"]
+    assert commands["teleop"][commands["teleop"].index("--style") + 1] == "teleop"
+    assert commands["teleop"][commands["teleop"].index("--diversity") + 1] == "1.0"
+    assert "--placement-spread-cm" not in commands["teleop"]
+    placed = commands["teleop_placed"]
+    assert placed[placed.index("--placement-spread-cm") + 1] == "3.0" and "--style" in placed
+    table2 = Sweep.load(sweeps / "libero_object_table2.yaml").settings.data["libero_object"]
+    scripted = loaded["scripted"].settings.data["libero_object"]
+    assert {k: v for k, v in vars(scripted).items() if k not in ("hdf5", "frontend")} == \
+        {k: v for k, v in vars(table2).items() if k not in ("hdf5", "frontend")}

@@ -18,6 +18,13 @@ from lerobot_predvla.sweep.workspace import Workspace
 from lerobot_predvla.utils.io import atomic_write_json
 
 
+def style_args(spec: DataSpec) -> list[str]:
+    """`predvla demos` flags of the demonstration style and the placement spread; none for the scripted style on
+    LIBERO's placements, so the commands of earlier sweeps stay as they were recorded."""
+    args = ["--style", spec.style, "--diversity", str(spec.diversity)] if spec.style != "scripted" else []
+    return args + (["--placement-spread-cm", str(spec.placement_spread)] if spec.placement_spread > 0 else [])
+
+
 class DataStages(Workspace):
     """Makes the datasets a sweep trains on."""
 
@@ -80,6 +87,7 @@ class DataStages(Workspace):
                         spec.half_turn,
                         "--hold-steps",
                         str(spec.hold_steps),
+                        *style_args(spec),
                         "--out",
                         str(hdf5),
                     ],

@@ -16,6 +16,7 @@ from lerobot_predvla.data.conversion import IMAGE_STORAGES
 from lerobot_predvla.lerobot_commands import policy_args
 from lerobot_predvla.policies.recipe import NOT_RECIPE
 from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
+from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE, STYLES
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK
 from lerobot_predvla.sweep.lr_selection import LRSweep, candidate_name
 
@@ -178,6 +179,12 @@ class DataSpec:
             its range: one wrist branch per task also with init_noise).
         hold_steps: Idle steps (arm still, gripper open) recorded after each demonstration's success (`predvla demos
             --hold-steps`; 0: episodes end at success, as LIBERO's).
+        style: Who executes the expert's plan (`predvla demos --style`): 'scripted' (every earlier dataset) or
+            'teleop' (the teleoperator model, sims/libero/expert/teleop.py).
+        diversity: With style 'teleop': how strongly the teleoperator perturbs the plan (`--diversity`; 0: the script's
+            actions, 1: the committed setting).
+        placement_spread: Std (cm, per axis) of a seeded x, y shift of every movable object after each reset
+            (`predvla demos --placement-spread-cm`; 0: LIBERO's placements).
         vision_weights: ResNet18 weights of the front end ('imagenet', a .pth file, or 'random': the offline
             substitute, printed as such).
         language_from: Instructions of the language PCA: 'libero' (all 40 of the task list, Section 4.1) or 'demos'.
@@ -202,6 +209,9 @@ class DataSpec:
     init_noise: float = 0.0
     half_turn: str = DEFAULT_HALF_TURN
     hold_steps: int = 0
+    style: str = DEFAULT_STYLE
+    diversity: float = 1.0
+    placement_spread: float = 0.0
     vision_weights: str = "imagenet"
     language_from: str = "libero"
     frame_stride: int = 4
@@ -320,6 +330,11 @@ class Sweep:
                 )
             if spec.hold_steps < 0:
                 raise SweepError(f"{path}: data.{suite}.hold_steps must be >= 0, got {spec.hold_steps}.")
+            if spec.style not in STYLES:
+                raise SweepError(f"{path}: data.{suite}.style must be one of {STYLES}, got {spec.style!r}.")
+            if spec.diversity < 0 or spec.placement_spread < 0:
+                raise SweepError(f"{path}: data.{suite}.diversity and placement_spread must be >= 0, got "
+                                 f"{spec.diversity} and {spec.placement_spread}.")
             if spec.workers < 1:
                 raise SweepError(f"{path}: data.{suite}.workers must be >= 1, got {spec.workers}.")
             if spec.image_storage not in IMAGE_STORAGES:

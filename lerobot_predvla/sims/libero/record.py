@@ -9,6 +9,7 @@ import time
 from tqdm import tqdm
 
 from lerobot_predvla.sims.libero.env import make_env, num_tasks, official_init_states, random_reset, task_spec
+from lerobot_predvla.sims.libero.expert.teleop import TELEOP
 from lerobot_predvla.sims.libero.hdf5_layout import file_attrs, task_file, write_task_file
 from lerobot_predvla.sims.libero.protocol import STEP_CAPS
 from lerobot_predvla.sims.libero.render import replay_observations
@@ -17,6 +18,13 @@ from lerobot_predvla.sims.libero.rollout import run_episode
 
 def episode_seed(seed: int, task_id: int, attempt: int) -> int:
     return seed * 1_000_003 + task_id * 10_007 + attempt
+
+
+def style_attrs(style: str, diversity: float, placement_spread_cm: float) -> dict:
+    """The file attributes that name a demonstration style and a placement spread; none for the scripted style's
+    LIBERO placements, so every earlier dataset is written as before."""
+    attrs = {"predvla_style": style, "predvla_diversity": diversity} if style != "scripted" else {}
+    return {**attrs, **({"predvla_placement_spread_cm": placement_spread_cm} if placement_spread_cm > 0 else {})}
 
 
 def record_demos(args: argparse.Namespace) -> int:
@@ -33,6 +41,14 @@ def record_demos(args: argparse.Namespace) -> int:
     if args.official_init_states and not args.no_render:
         raise SystemExit("--official-init-states only measures expert success: pass --no-render with it "
                          "(demonstrations never start from the evaluation init states)")
+    if args.diversity is not None and args.style != "teleop":
+        raise SystemExit(f"--diversity {args.diversity} needs --style teleop (the script has no diversity)")
+    diversity = 1.0 if args.diversity is None else args.diversity
+    if diversity < 0:
+        raise SystemExit(f"--diversity must be >= 0, got {diversity}")
+    if args.placement_spread_cm < 0:
+        raise SystemExit(f"--placement-spread-cm must be >= 0, got {args.placement_spread_cm}")
+    teleop = TELEOP.at(diversity) if args.style == "teleop" else None
     if args.out is None and not args.no_render:
         raise SystemExit("--out is required (or pass --no-render to only measure expert success)")
     task_ids = args.tasks if args.tasks is not None else list(range(num_tasks(args.suite)))
@@ -49,7 +65,8 @@ def record_demos(args: argparse.Namespace) -> int:
             while len(kept) < args.per_task and attempts < max_attempts:
                 start = None if init_states is None else init_states[attempts % len(init_states)]
                 episode = run_episode(env, episode_seed(args.seed, task_id, attempts), max_steps, args.half_turn,
-                                      init_state=start, hold_steps=args.hold_steps)
+                                      init_state=start, hold_steps=args.hold_steps, teleop=teleop,
+                                      placement_spread=args.placement_spread_cm / 100)
                 attempts += 1
                 if episode.success:
                     kept.append(episode)
@@ -64,7 +81,8 @@ def record_demos(args: argparse.Namespace) -> int:
             render_env = make_env(spec, render=True)
             random_reset(render_env, 0)
             attrs = {**file_attrs(spec, render_env, args.init_noise), "predvla_render_interval": args.render_interval,
-                     "predvla_half_turn": args.half_turn, "predvla_hold_steps": args.hold_steps}
+                     "predvla_half_turn": args.half_turn, "predvla_hold_steps": args.hold_steps,
+                     **style_attrs(args.style, diversity, args.placement_spread_cm)}
             for episode in tqdm(kept, desc=f"{args.suite}/{task_id} rendering", unit="demo"):
                 obs = replay_observations(render_env, episode, args.render_interval)
                 demos.append({**obs, "actions": episode.actions, "states": episode.states,
@@ -78,7 +96,9 @@ def record_demos(args: argparse.Namespace) -> int:
 
     starts = "official init states" if args.official_init_states else \
         f"randomised resets, seed {args.seed}, initial joint noise {args.init_noise}"
-    print(f"\nExpert success ({args.suite}, {starts}, half turn {args.half_turn}):")
+    style = f"teleop at diversity {diversity}" if args.style == "teleop" else "scripted"
+    spread = f", placements shifted by {args.placement_spread_cm} cm (std)" if args.placement_spread_cm > 0 else ""
+    print(f"\nExpert success ({args.suite}, {starts}, half turn {args.half_turn}, {style}{spread}):")
     print(f"{'task':>4}  {'attempts':>8}  {'successes':>9}  {'rate':>5}  {'steps/demo':>10}  "
           f"{'s/attempt':>9}  {'render s/demo':>13}  name")
     for spec, attempts, ok, steps, t_roll, t_render, _ in report:

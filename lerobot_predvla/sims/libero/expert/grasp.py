@@ -99,15 +99,15 @@ class Grasping(Motion):
                 pos, yaw = self._grasp_pose(name, r)
                 return pos - a * (h - pos[2]) / -a[2], yaw  # back along the approach axis, up to height h
 
-            yield from self._move(above, OPEN, tol=0.01, max_steps=80, axis=axis)
+            yield from self._move(above, OPEN, tol=0.01, max_steps=80, axis=axis, phase="approach")
             yield from self._move(lambda r=radial: self._grasp_pose(name, r), OPEN, tol=0.006, max_steps=50,
-                                  max_speed=0.6, axis=axis)
-            yield from self._hold(CLOSE, 12, axis=axis)
+                                  max_speed=0.6, axis=axis, phase="descend")
+            yield from self._hold(CLOSE, 12, axis=axis, phase="close")
             eef = self.view.eef_pos()
             # Also clear the object's own support (a cabinet top) and the walls around it (a drawer's).
             up = max(lift_z, eef[2] + 0.08, eef[2] + self._walls_top(name) + 0.03 - self.view.box(name).bottom)
             yield from self._move(lambda e=eef, z=up: (np.array([e[0], e[1], z]), None), CLOSE,
-                                  tol=0.02, max_steps=40)
+                                  tol=0.02, max_steps=40, phase="lift")
             if self.view.box(name).bottom > start_z + 0.03:
                 return
             yield from self._hold(OPEN, 8)

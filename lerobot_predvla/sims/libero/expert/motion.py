@@ -118,8 +118,10 @@ class Motion:
         return np.concatenate([dpos, drot, [grip]])
 
     def _move(self, goal, grip: float, tol: float = 0.01, max_steps: int = 60, max_speed: float = 1.0,
-              axis: np.ndarray = DOWN) -> Skill:
-        """Move until within `tol` of goal() -> (pos, finger); goal is re-evaluated every step."""
+              axis: np.ndarray = DOWN, phase: str = "") -> Skill:
+        """Move until within `tol` of goal() -> (pos, finger); goal is re-evaluated every step. `phase` names what
+        the move is for in a pick and place ("approach", "descend", "lift", "carry", "lower", "retreat"): the
+        script moves alike whatever it is, the teleoperator model (teleop.py) perturbs by it."""
         for _ in range(max_steps):
             pos, finger = goal()
             if np.linalg.norm(pos - self.view.eef_pos()) < tol and (
@@ -127,7 +129,10 @@ class Motion:
                 return
             yield self._action(pos, finger, grip, axis, max_speed=max_speed)
 
-    def _hold(self, grip: float, steps: int, finger: np.ndarray | None = None, axis: np.ndarray = DOWN) -> Skill:
+    def _hold(self, grip: float, steps: int, finger: np.ndarray | None = None, axis: np.ndarray = DOWN,
+              phase: str = "") -> Skill:
+        """Hold the hand where it is for `steps` steps with the gripper at `grip`; `phase` ("close", "release") as in
+        `_move`."""
         pos = self.view.eef_pos()
         for _ in range(steps):
             yield self._action(pos, finger, grip, axis)

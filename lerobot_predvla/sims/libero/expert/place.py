@@ -93,12 +93,12 @@ class Placing(Grasping):
             return lambda: (np.array([*(target.xy - offset_xy), z]), None)
 
         speed = 0.6 if box.short > MAX_FINGER_SPAN else 1.0  # held by the rim: a fast swing shakes it loose
-        yield from self._move(at(carry_z), CLOSE, tol=0.02, max_steps=30, max_speed=speed)  # up
+        yield from self._move(at(carry_z), CLOSE, tol=0.02, max_steps=30, max_speed=speed, phase="carry")  # up
         yield from self._move(at(carry_z), CLOSE, tol=0.01, max_steps=100, max_speed=speed)
-        yield from self._move(at(target.release_z + below), CLOSE, tol=0.01, max_steps=40, max_speed=0.5)
-        yield from self._hold(OPEN, 10)
+        yield from self._move(at(target.release_z + below), CLOSE, tol=0.01, max_steps=40, max_speed=0.5, phase="lower")
+        yield from self._hold(OPEN, 10, phase="release")
         up = v.eef_pos() + [0, 0, 0.08]
-        yield from self._move(lambda: (up, None), OPEN, tol=0.02, max_steps=20)
+        yield from self._move(lambda: (up, None), OPEN, tol=0.02, max_steps=20, phase="retreat")
 
     def _opening(self, place: str) -> np.ndarray | None:
         """Unit xy direction out of a roofed region site (a microwave's cavity) through its open side: of +-x and
