@@ -14,6 +14,7 @@ shape: sequences of 200 steps, 500 episodes of 132-150 steps):
 | `ddp2x16_unshared` | the action term's chain rolled out a second time (before the shared chain) |
 | `ddp2x16_ckpt50` | a checkpoint (weights, optimizer, posteriors) every 50 steps instead of none |
 | `ddp2x16_table2` | Table 2's literal recipe (one chain per step) instead of `--recipe` |
+| `ddp2x16_bf16` | `--policy.use_amp=true` (bfloat16 loops; only with `--arms`) |
 
 Then, in this process on one thread, the policy's own training step at batch 16 (forward, backward, both Adams)
 without `lerobot-train`: `ddp2x16_over_fast_step` is what LeRobot's loop and DDP add to it.
@@ -42,15 +43,17 @@ RECIPES = {
     "fit_sensory_olt": {"posteriors_fit_actions": False, "open_loop_weight": 1.0},
 }
 ARMS = {
-    # name: (processes, threads per process, recipe or None for --recipe, save_freq or None, patches)
-    "ddp2x16": (2, 1, None, None, ""),
-    "1x32_1thread": (1, 1, None, None, ""),
-    "1x32_2threads": (1, 2, None, None, ""),
-    "ddp2x16_untrimmed": (2, 1, None, None, "untrimmed"),
-    "ddp2x16_unshared": (2, 1, None, None, "unshared"),
-    "ddp2x16_ckpt50": (2, 1, None, 50, ""),
-    "ddp2x16_table2": (2, 1, "table2", None, ""),
+    # name: (processes, threads per process, recipe or None for --recipe, save_freq or None, patches, policy fields)
+    "ddp2x16": (2, 1, None, None, "", {}),
+    "1x32_1thread": (1, 1, None, None, "", {}),
+    "1x32_2threads": (1, 2, None, None, "", {}),
+    "ddp2x16_untrimmed": (2, 1, None, None, "untrimmed", {}),
+    "ddp2x16_unshared": (2, 1, None, None, "unshared", {}),
+    "ddp2x16_ckpt50": (2, 1, None, 50, "", {}),
+    "ddp2x16_table2": (2, 1, "table2", None, "", {}),
+    "ddp2x16_bf16": (2, 1, None, None, "", {"use_amp": True}),
 }
+DEFAULT_ARMS = [name for name in ARMS if name != "ddp2x16_bf16"]  # bfloat16 is opt-in: measured on request
 UPDATE_S = re.compile(r"updt_s:([0-9.]+)")  # lerobot-train's log line: the update alone, its window's mean
 BATCH, SEQUENCE_LENGTH, EPISODE_LENGTHS, TASKS, EPISODES_PER_TASK = 32, 200, (132, 150), 10, 50
 
@@ -67,11 +70,11 @@ def synthetic_dataset(root: Path) -> Path:
 
 
 def arm_command(name: str, dataset: Path, work: Path, steps: int, recipe: str) -> tuple[list[str], dict]:
-    processes, threads, arm_recipe, save_freq, patches = ARMS[name]
+    processes, threads, arm_recipe, save_freq, patches, fields = ARMS[name]
     module = ["-m", "benchmarks.lerobot_train_timed"]
     program = ([lerobot_commands.TORCHRUN, f"--nproc_per_node={processes}", *module] if processes > 1
                else [sys.executable, *module])
-    fields = {**RECIPES[arm_recipe or recipe], "sequence_length": SEQUENCE_LENGTH}
+    fields = {**RECIPES[arm_recipe or recipe], "sequence_length": SEQUENCE_LENGTH, **fields}
     command = lerobot_commands.train_command(
         program=program, policy=lerobot_commands.policy_args("predvla", fields), dataset_repo_id="local/profile",
         dataset_root=dataset, output_dir=work / "runs" / name, steps=steps, batch_size=BATCH // processes,
@@ -136,7 +139,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200, help="steps per arm (below 1,000: exact log step counts)")
     parser.add_argument("--warmup", type=int, default=20, help="iterations dropped at the start of each arm")
     parser.add_argument("--recipe", choices=sorted(RECIPES), default="fit_sensory_olt")
-    parser.add_argument("--arms", default=",".join(ARMS), help=f"comma-separated, of {', '.join(ARMS)}")
+    parser.add_argument("--arms", default=",".join(DEFAULT_ARMS), help=f"comma-separated, of {', '.join(ARMS)}")
     parser.add_argument("--out", type=Path, help="write the JSON result here too")
     args = parser.parse_args()
     arms = args.arms.split(",")
@@ -151,11 +154,11 @@ def main() -> None:
         print(f"{name}: {results[name]['iteration_s_median']:.3f} s per iteration "
               f"(updt_s {results[name]['updt_s_median']})", file=sys.stderr, flush=True)
     base = results.get("ddp2x16", {}).get("iteration_s_median")
-    fast = fast_step_s(dataset, args.recipe, BATCH // 2)
+    fast = fast_step_s(dataset, args.recipe, BATCH // 2) if base else None
     summary = {"recipe": args.recipe, "dataset": str(dataset), "steps": args.steps, "warmup": args.warmup,
                # lerobot-train's iteration (DDP rank 0, batch 16, one thread) over the policy's own step at batch 16
                # on one thread: what LeRobot's loop and DDP add (target <= 1.15)
-               "fast_step_s_batch16": round(fast, 4),
+               "fast_step_s_batch16": round(fast, 4) if fast else None,
                "ddp2x16_over_fast_step": round(base / fast, 3) if base else None,
                "arms": {n: {**r, **({"over_ddp2x16": round(r["iteration_s_median"] / base, 3)} if base else {})}
                         for n, r in results.items()}}

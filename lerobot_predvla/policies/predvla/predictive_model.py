@@ -16,7 +16,6 @@ from lerobot_predvla.policies.predvla.configuration_predvla import PredVLAConfig
 from lerobot_predvla.policies.predvla.recurrence import (
     A_BOTTOM,
     A_TOP,
-    PYTHON_KERNELS,
     FusedWeights,
     Meta,
     T,
@@ -234,17 +233,16 @@ class PredictiveModel(nn.Module):
         """`rollout(state, lang_term, c_q)` and `rollout(state, lang_term, c_q.detach())` from one run of the loops
         (`recurrence.SharedActingChain`): the same values and gradients as the two rollouts. The second trajectory
         is for the action term only: its GMM parameters carry their gradient to the network and not to c_q; its
-        other fields are the first's, detached."""
+        other fields are the first's, detached. Under mixed precision it is the two rollouts: the shared chain
+        splits the priors' gradient by a subtraction, which would cost bfloat16 most of its few digits."""
+        if autocast_dtype(c_q.device.type) is not None:
+            return self.rollout(state, lang_term, c_q), self.rollout(state, lang_term, c_q.detach())
         p = self._pre_activations(state, lang_term, c_q, None, c_q.shape[0])
         p_act = self._pre_activations(state, lang_term, c_q.detach(), None, c_q.shape[0])
-        meta, (p, h, d, a, q), weights, low = self._loop_inputs(state, p, False)
-        if low is not None:
-            p_act = cast_floats(p_act, low)
-        kernels = PYTHON_KERNELS if low is not None else recurrence_cpp.kernels(self.config.recurrence_backend, p[T])
+        meta, (p, h, d, a, q), weights, _ = self._loop_inputs(state, p, False)
+        kernels = recurrence_cpp.kernels(self.config.recurrence_backend, p[T])
         with torch.autocast(p[T].device.type, enabled=False):
             *outputs, hidden_act = shared_acting_chain(kernels, meta, p, p_act, h, d, a, q, weights)
-        if low is not None:
-            outputs, hidden_act = cast_floats((outputs, hidden_act), torch.float32)
         traj = self._trajectory(state, *outputs)
         acting = Trajectory(
             d=tuple(x.detach() for x in traj.d), d_prev_top=traj.d_prev_top.detach(), q_hat=traj.q_hat.detach(),
