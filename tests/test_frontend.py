@@ -240,3 +240,20 @@ def test_an_enclosing_autocast_does_not_change_the_features(frontend):
         got = frontend.encode_images(images), frontend.encode_instructions(INSTRUCTIONS[:2])
     for a, b in zip(got, expected, strict=True):
         assert a.dtype == torch.float32 and torch.equal(a, b)
+
+
+def test_the_features_do_not_depend_on_the_thread_count(frontend):
+    """`predvla fit-frontend --threads` and `predvla convert --threads` run the image encoder on several threads:
+    the features, image and instruction alike, are those of one thread (the language encoder keeps one)."""
+    images = {camera: libero_hdf5_to_lerobot(raw_images(4, seed=i)) for i, camera in enumerate(HDF5_CAMERAS)}
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        expected = frontend.encode_images(images), frontend.encode_instructions(INSTRUCTIONS[:2])
+        torch.set_num_threads(2)
+        got = frontend.encode_images(images), frontend.encode_instructions(INSTRUCTIONS[:2])
+        assert torch.get_num_threads() == 2  # the language encoder put the setting back
+    finally:
+        torch.set_num_threads(before)
+    for a, b in zip(got, expected, strict=True):
+        assert torch.equal(a, b)

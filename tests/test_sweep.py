@@ -536,6 +536,7 @@ def test_data_only_makes_the_datasets_without_frames_and_stops(tmp_path, monkeyp
     programs = [c[c.index("lerobot_predvla.cli.main") + 1] for c in fake.commands if "lerobot_predvla.cli.main" in c]
     assert programs == ["demos", "fit-frontend", "convert"] and len(fake.commands) == 3
     assert arg_value(fake.commands[2], "--image-storage") == "none"
+    assert "--threads" not in fake.commands[1] and "--threads" not in fake.commands[2]  # frontend_threads 1
     (tmp_path / "bad").mkdir()
     bad = sweep_file(tmp_path / "bad", seeds=[0], suites=["libero_object"],
                      data={"libero_object": {**data["libero_object"], "image_storage": "jpeg"}})

@@ -5,6 +5,8 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
+import torch
+
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.data.dataset_fitting import FitDatasetFrontendConfig, fit_frontend_on_dataset
 from lerobot_predvla.data.fitting import FitFrontendConfig, fit_frontend, variance_summary
@@ -45,6 +47,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--vision-dim-per-camera", type=int, default=CONFIG_DEFAULTS["vision_dim_per_camera"])
     parser.add_argument("--frame-stride", type=int, default=1, help="Fit the visual PCA on every n-th frame.")
     parser.add_argument("--batch-size", type=int, default=64, help="Images per ResNet18 forward pass.")
+    parser.add_argument(
+        "--threads", type=int, default=None,
+        help="Torch threads of the image encoder (default: torch's setting, e.g. OMP_NUM_THREADS); the features "
+        "are the same for any count.",
+    )
     parser.add_argument(
         "--language-from", choices=LANGUAGE_SOURCES, default="demos",
         help="Instructions the language PCA is fitted on: 'demos' (default; one per pooled demonstration) or "
@@ -99,6 +106,11 @@ def parse_cameras(spec: str | None) -> list[str] | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.threads is not None:
+        if args.threads < 1:
+            print(f"predvla: error: --threads must be >= 1, got {args.threads}", file=sys.stderr)
+            return 2
+        torch.set_num_threads(args.threads)  # the language encoder keeps one (frontend/language.py)
     try:
         if dataset_source_given(args):
             if args.language_from != "demos":

@@ -6,6 +6,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from lerobot_predvla.frontend.vision import module_fingerprint
+from lerobot_predvla.utils.threads import torch_threads
 
 LANGUAGE_ENCODER_NAME = "sentence-transformers/all-MiniLM-L6-v2"
 LANGUAGE_ENCODER_DIM = 384
@@ -48,10 +49,11 @@ class LanguageEncoder:
         if not texts:
             return np.zeros((0, LANGUAGE_ENCODER_DIM), dtype=np.float32)
         unique = sorted(set(texts))
-        # One string per forward pass: padding within a batch perturbs the embedding in the last bits, and
-        # an instruction must map to the same features whatever it is encoded with.
-        rows = {
-            text: self.model.encode([text], convert_to_numpy=True, show_progress_bar=False)[0].astype(np.float32)
-            for text in unique
-        }
+        # One string per forward pass, on one thread: padding within a batch and the thread count perturb the
+        # embedding in the last bits, and an instruction must map to the same features whatever it is encoded with.
+        with torch_threads(1):
+            rows = {
+                text: self.model.encode([text], convert_to_numpy=True, show_progress_bar=False)[0].astype(np.float32)
+                for text in unique
+            }
         return np.stack([rows[t] for t in texts])

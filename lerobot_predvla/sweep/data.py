@@ -62,6 +62,7 @@ class DataStages(Workspace):
             return []
         hdf5, frontend = self.sweep_path(spec.hdf5), self.sweep_path(spec.frontend)
         commands = []
+        threads = ["--threads", str(spec.frontend_threads)] if spec.frontend_threads != 1 else []
         missing = self.missing_demo_tasks(suite, spec, hdf5)
         shares = [missing[k :: spec.workers] for k in range(min(spec.workers, len(missing)))]
         for k, share in enumerate(shares):
@@ -110,6 +111,7 @@ class DataStages(Workspace):
                         spec.language_from,
                         "--frame-stride",
                         str(spec.frame_stride),
+                        *threads,
                         "--out",
                         str(frontend),
                     ],
@@ -133,6 +135,7 @@ class DataStages(Workspace):
                     self.sweep.settings.datasets[suite]["repo_id"],
                     "--image-storage",
                     spec.image_storage,
+                    *threads,
                     *(["--oracle"] if spec.oracle else []),
                 ],
             )

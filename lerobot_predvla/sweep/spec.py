@@ -198,6 +198,9 @@ class DataSpec:
             'png', or 'none': the cached features only, which is all training reads (the same columns and values
             as the `features-only` copy of a dataset with frames), without encoding the frames as video, the
             longest part of a conversion. With 'none', `datasets.<suite>.root` is the training dataset itself.
+        frontend_threads: Torch threads of the image encoder in the front-end fit and the conversion
+            (`--threads`), which run after the demonstrations, alone: the cores the demonstrations used. The
+            features are the same for any count.
     """
 
     hdf5: str
@@ -218,6 +221,7 @@ class DataSpec:
     workers: int = 1
     oracle: bool = False
     image_storage: str = "video"
+    frontend_threads: int = 1
 
 
 @dataclass(frozen=True)
@@ -337,6 +341,8 @@ class Sweep:
                                  f"{spec.diversity} and {spec.placement_spread}.")
             if spec.workers < 1:
                 raise SweepError(f"{path}: data.{suite}.workers must be >= 1, got {spec.workers}.")
+            if spec.frontend_threads < 1:
+                raise SweepError(f"{path}: data.{suite}.frontend_threads must be >= 1, got {spec.frontend_threads}.")
             if spec.image_storage not in IMAGE_STORAGES:
                 raise SweepError(
                     f"{path}: data.{suite}.image_storage must be one of {IMAGE_STORAGES}, got {spec.image_storage!r}."

@@ -22,11 +22,10 @@ def acting_threads_count() -> int | None:
 
 
 @contextmanager
-def acting_threads(device: torch.device | str) -> Iterator[None]:
-    """Run the block on `acting_threads_count()` torch threads if `device` is the CPU; restore torch's setting."""
-    threads = acting_threads_count()
+def torch_threads(threads: int | None) -> Iterator[None]:
+    """Run the block on `threads` torch intra-op threads (None: torch's own setting); restore torch's setting."""
     before = torch.get_num_threads()
-    if threads is None or torch.device(device).type != "cpu" or before == threads:
+    if threads is None or before == threads:
         yield
         return
     torch.set_num_threads(threads)
@@ -34,3 +33,10 @@ def acting_threads(device: torch.device | str) -> Iterator[None]:
         yield
     finally:
         torch.set_num_threads(before)
+
+
+@contextmanager
+def acting_threads(device: torch.device | str) -> Iterator[None]:
+    """Run the block on `acting_threads_count()` torch threads if `device` is the CPU; restore torch's setting."""
+    with torch_threads(acting_threads_count() if torch.device(device).type == "cpu" else None):
+        yield
