@@ -203,3 +203,23 @@ def test_lerobot_eval_writes_the_shifts_into_eval_info(tmp_path):
     assert shifts["spec"]["object_cm"] == 2 and shifts["unsettled_episodes"] == []
     (episode,) = shifts["episodes"]
     assert episode["task_id"] == 1 and episode["bodies"][0]["name"] == "cream_cheese_1"
+
+
+@pytest.mark.simulator
+def test_counted_episodes_keep_their_init_states_across_gymnasiums_autoresets():
+    """Sub-environment 0 of 2 ends early (a non-finite action faults it), so Gymnasium resets it on the next step for
+    an extra episode lerobot-eval discards; lerobot-eval's next rollout still starts it from official init state 2."""
+    cfg = PredVLALiberoEnv(task="libero_object", task_ids=[0], episode_length=6, render_interval=1000,
+                           object_shift_cm=1)
+    venv = cfg.create_envs(2)["libero_object"][0]
+    new_rollout = {"lerobot_new_rollout": True}
+    try:
+        venv.reset(seed=[0, 0], options=new_rollout)
+        *_, terminated, _, _ = venv.step(np.concatenate([np.full_like(IDLE, np.nan), IDLE]))
+        assert terminated.tolist() == [True, False]
+        venv.step(np.concatenate([IDLE, IDLE]))  # Gymnasium's autoreset of sub-environment 0
+        venv.reset(seed=[0, 0], options=new_rollout)
+        assert [r["init_state"] for r in venv.envs[0].shift_records] == [0, 2]
+        assert [r["init_state"] for r in venv.envs[1].shift_records] == [1, 3]
+    finally:
+        venv.close()

@@ -11,7 +11,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lerobot_predvla import lerobot_commands
-from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
+from lerobot_predvla.experiments.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info, unsettled_episodes
 from lerobot_predvla.experiments.sweep.layout import EVAL_WALL_FILE
 from lerobot_predvla.experiments.sweep.spec import ConfigSpec, Run, SweepError
 from lerobot_predvla.experiments.sweep.workspace import Workspace
@@ -37,14 +37,14 @@ class Evaluation(Workspace):
             device=s.eval_device,
             policy=[*lerobot_commands.field_args(spec.eval_overrides), *self.corruption_args(spec, run.suite)],
             env_type=s.env_type,
-            suite=run.suite,
+            suite=spec.env_task(run.suite),
             episode_length=s.episode_length,
             init_states=spec.init_states,
             n_episodes=spec.n_episodes or s.n_episodes,
             batch_size=s.eval_batch_size,
             seed=run.seed if spec.eval_seed is None else spec.eval_seed,
             output_dir=out or self.eval_dir(run),
-            extra=[*s.eval_args, *spec.eval_args, *extra],
+            extra=[*s.eval_args, *spec.eval_args, *spec.shift_args(), *extra],
         )
 
     def corruption_args(self, spec: ConfigSpec, suite: str) -> list[str]:
@@ -109,10 +109,11 @@ class Evaluation(Workspace):
             finished = list(pool.map(lambda part: self.evaluate_part(run, part[1], part[0], part_log(part[0])), parts))
         if not all(finished):
             return False
-        tasks, commands, wall = {}, [command for _, command in parts], 0.0
+        tasks, commands, wall, unsettled = {}, [command for _, command in parts], 0.0, 0
         for out, _ in parts:
             try:
                 tasks.update(parse_eval_info(out / EVAL_INFO_FILE))
+                unsettled += unsettled_episodes(out / EVAL_INFO_FILE)
             except EvalInfoError as err:
                 raise SweepError(str(err)) from err
             wall_file = out / EVAL_WALL_FILE
@@ -130,6 +131,9 @@ class Evaluation(Workspace):
             "corruption": spec.corruption,
             "eval_overrides": spec.eval_overrides,
             "init_states": spec.init_states,
+            "object_shift": spec.object_shift,  # with the episodes whose shifted bodies did not settle (unsettled)
+            "shift_unsettled": unsettled if spec.object_shift else None,
+            "variant": spec.variant,
             "eval_seed": run.seed if spec.eval_seed is None else spec.eval_seed,
             "checkpoint_from": spec.checkpoint_from,
             "suite": run.suite,
