@@ -32,6 +32,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lerobot_predvla.sims.libero.expert.motion import SKILL_ORDER
+from lerobot_predvla.sims.libero.geometry import SceneView
 
 PATTERNS = ("ring", "cross")
 CROSS_DEGREES = (0.0, 180.0, 90.0, 270.0)  # +x, -x, +y, -y
@@ -99,8 +100,6 @@ def pick_and_place(goal: list) -> tuple[str, str]:
 def shifted_bodies(env) -> dict[str, str]:
     """{"object": object to pick, "target": the movable object it is placed in or on} of a LIBERO ControlEnv; no
     "target" when the place is a fixture or a table region."""
-    from lerobot_predvla.sims.libero.geometry import SceneView
-
     view = SceneView(env)
     obj, place = pick_and_place(env.env.parsed_problem["goal_state"])
     owner = view.site_parent(place) if place in view.inner.object_sites_dict else place
