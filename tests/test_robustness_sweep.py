@@ -103,3 +103,33 @@ def test_bad_shift_or_variant_entries_name_the_configuration_and_the_problem(tmp
     configs = [{"name": "predvla"}, {"name": "bad", "group": "robustness", "checkpoint_from": "predvla", **change}]
     with pytest.raises(SweepError, match=f"configuration bad: .*{message}"):
         Sweep.load(sweep_file(tmp_path, configs=configs))
+
+
+def test_the_looking_sweep_measures_every_policy_under_every_condition_paired_with_the_open_loop(tmp_path):
+    """configs/sweeps/libero_object_looking.yaml (docs/research/looking.md): the committed trainings' configurations as
+    their sweeps trained them, 5 policies x (6 shifts + 8 variants) on the same 20 starts, each paired with PredVLA's
+    exact open loop of the same condition."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    looking, table2, reading = (Sweep.load(sweeps / f) for f in ("libero_object_looking.yaml",
+                                                                 "libero_object_table2.yaml",
+                                                                 "libero_object_reading_full.yaml"))
+    for name, twin in (("B1", table2.configs["B1"]), ("B2", table2.configs["B2"]),
+                       ("predvla_reading", reading.configs["predvla_reading"])):
+        ours = looking.configs[name]
+        assert (ours.policy, ours.steps, ours.lr_sweep) == (twin.policy, twin.steps, twin.lr_sweep), name
+    s = looking.settings
+    assert (s.n_episodes, s.eval_tasks, s.episode_length, s.seeds) == (4, [0, 2, 4, 6, 8], 600, [0])
+    rows: dict[str, set] = {}
+    for spec in looking.configs.values():
+        assert spec.group == "robustness" and spec.init_states and spec.n_episodes is None
+        shift = spec.object_shift or {}
+        assert (shift.get("pattern"), shift.get("directions")) in ((None, None), ("ring", 4))
+        rows.setdefault(spec.label, set()).add(spec.variant or shift["cm"])
+        if spec.compare_to is not None:
+            reference = looking.configs[spec.compare_to]
+            assert (reference.object_shift, reference.variant) == (spec.object_shift, spec.variant), spec.name
+            assert reference.eval_overrides == {"er_iterations": 0}, spec.name
+    conditions = {0, 1, 2, 3, 4, 6, "pro_temp_x0.1", "pro_temp_x0.2", "pro_temp_y0.1", "pro_temp_y0.2", "pro_swap",
+                  "pro_lan", "pro_with_yellow_book", "plus_language_1"}
+    assert len(rows) == 5 and all(row == conditions for row in rows.values())
+    assert len(looking.configs) == 5 * len(conditions)
