@@ -158,3 +158,10 @@ def test_replays_under_a_shift_record_each_states_shift_and_settling(tmp_path):
     (body,) = shift["bodies"]
     assert body["name"] == "alphabet_soup_1" and body["direction_deg"] == 180 and body["offset_m"] == [-0.04, 0.0]
     assert shift["settled"] and task["plans"]["state0"]["episodes"] == 1
+
+
+def test_unshifted_settings_keep_the_form_the_committed_results_were_recorded_with():
+    """A blind replay without a shift still finds the committed per-task results (same settings), so they are reused."""
+    committed = json.loads((REPO / "results" / "blind_replay" / "tasks" / SUITE / "task0.json").read_text())
+    assert committed["settings"] == blind_replay.Settings().as_dict()
+    assert "shift" in blind_replay.Settings(shift=blind_replay.ShiftSpec(object_cm=2)).as_dict()
