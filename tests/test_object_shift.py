@@ -118,22 +118,25 @@ def _episode(task: str, steps: int = 3, **env_kwargs):
 
 
 @pytest.mark.simulator
-def test_shifted_object_rests_where_it_was_put_and_the_shift_is_recorded():
+def test_shifted_object_and_target_rest_where_they_were_put_and_the_shifts_are_recorded():
     from lerobot_predvla.sims.libero.env import official_init_states
     from lerobot_predvla.sims.libero.object_shift import pose
 
-    venv, reset_info, _ = _episode("libero_object", object_shift_cm=4, object_shift_pattern="cross")
+    venv, reset_info, _ = _episode("libero_object", object_shift_cm=4, target_shift_cm=3, object_shift_pattern="cross")
     try:
         env = venv.envs[0]
         (record,) = env.shift_records
         assert record["episode_ix"] == 0 and record["init_state"] == 0 and record["settled"]
-        (body,) = record["bodies"]
-        assert body["name"] == "alphabet_soup_1" and body["role"] == "object" and body["direction_deg"] == 0
         official = official_init_states("libero_object", 0)[0]
-        address = env._env.sim.model.get_joint_qpos_addr(env._env.env.objects_dict[body["name"]].joints[0])[0]
-        np.testing.assert_allclose(body["placed"][:2], official[1 + address:3 + address] + [0.04, 0], atol=1e-9)
-        now = pose(env._env, body["name"])  # after the reset's settle steps and three idle steps
-        assert np.linalg.norm(now[:2] - np.asarray(body["placed"][:2])) < 0.005
+        bodies = {body["role"]: body for body in record["bodies"]}
+        for role, name, direction, offset in (("object", "alphabet_soup_1", 0, [0.04, 0]),
+                                              ("target", "basket_1", 180, [-0.03, 0])):
+            body = bodies[role]
+            assert (body["name"], body["direction_deg"]) == (name, direction)
+            address = env._env.sim.model.get_joint_qpos_addr(env._env.env.objects_dict[name].joints[0])[0]
+            np.testing.assert_allclose(body["placed"][:2], official[1 + address:3 + address] + offset, atol=1e-9)
+            now = pose(env._env, name)  # after the reset's settle steps and three idle steps
+            assert np.linalg.norm(now[:2] - np.asarray(body["placed"][:2])) < 0.005
         assert reset_info["shift_settled"][0]
     finally:
         venv.close()
