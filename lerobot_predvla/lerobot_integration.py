@@ -24,6 +24,7 @@ from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM, LEROBOT_LIBERO_STATE
 from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
 from lerobot_predvla.sims.libero.config_path import use_venv_config
 from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv, fault_summary, libero_env_processors
+from lerobot_predvla.sims.libero.object_shift import shift_summary
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.utils.checkpoints import (
     remove_leftovers,
@@ -92,7 +93,9 @@ def make_env_pre_post_processors(env_cfg: EnvConfig, policy_cfg) -> tuple:
 
 def eval_policy_all(envs: dict, policy, env_preprocessor, *args, **kwargs) -> dict:
     """LeRobot's `eval_policy_all`, plus the `predvla_faults` section (written into eval_info.json): faulted episodes
-    with their reasons, non-finite actions, observations the policy masked, actions it replaced, injected faults.
+    with their reasons, non-finite actions, observations the policy masked, actions it replaced, injected faults; and
+    with shifted objects (`--env.object_shift_cm`), the `predvla_shifts` section: every episode's shift and whether
+    the shifted bodies settled where they were put.
 
     Replaces: `lerobot.scripts.lerobot_eval.eval_policy_all` (which `lerobot-eval` calls from its own module, and
     `lerobot-train`'s periodic evaluation through the name it imported, left unchanged).
@@ -102,6 +105,9 @@ def eval_policy_all(envs: dict, policy, env_preprocessor, *args, **kwargs) -> di
     """
     info = _lerobot_eval_policy_all(envs, policy, env_preprocessor, *args, **kwargs)
     info["predvla_faults"] = fault_summary(envs, policy, env_preprocessor)
+    shifts = shift_summary(envs)
+    if shifts is not None:
+        info["predvla_shifts"] = shifts
     return info
 
 

@@ -141,3 +141,26 @@ def test_headline_reference_row_comes_from_the_blind_replay_report(tmp_path):
     (tmp_path / "results/blind_replay/report.json").write_text(json.dumps({SUITE: {"0": {"successes": 1}}}))
     with pytest.raises(ReportError, match="blind_replay/report.json"):
         headline.update_docs(tmp_path, check=True)
+
+
+@pytest.mark.simulator
+def test_replays_under_a_shift_record_each_states_shift_and_settling(tmp_path):
+    """`--object-shift-cm`: the replay on official init state 1 starts with the object moved as lerobot-eval's episode
+    1 would (cross: -x), and the task's file says where it went and that it settled; the settings name the shift."""
+    out = tmp_path / "shifted"
+    args = ["blind-replay", "--suites", SUITE, "--tasks", str(TASK_ID), "--states", "1", "--cap", str(CAP),
+            "--object-shift-cm", "4", "--object-shift-pattern", "cross", "--out", str(out)]
+    assert predvla_main(args) == 0
+    task = json.loads(blind_replay.task_path(out, SUITE, TASK_ID).read_text())
+    assert task["settings"]["shift"]["object_cm"] == 4 and task["settings"]["shift"]["pattern"] == "cross"
+    shift = task["plans"]["state0"]["shifts"]["1"]
+    (body,) = shift["bodies"]
+    assert body["name"] == "alphabet_soup_1" and body["direction_deg"] == 180 and body["offset_m"] == [-0.04, 0.0]
+    assert shift["settled"] and task["plans"]["state0"]["episodes"] == 1
+
+
+def test_unshifted_settings_keep_the_form_the_committed_results_were_recorded_with():
+    """A blind replay without a shift still finds the committed per-task results (same settings), so they are reused."""
+    committed = json.loads((REPO / "results" / "blind_replay" / "tasks" / SUITE / "task0.json").read_text())
+    assert committed["settings"] == blind_replay.Settings().as_dict()
+    assert "shift" in blind_replay.Settings(shift=blind_replay.ShiftSpec(object_cm=2)).as_dict()

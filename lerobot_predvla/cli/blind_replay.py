@@ -32,6 +32,7 @@ from lerobot_predvla.sims.libero.blind_replay import (
 )
 from lerobot_predvla.sims.libero.env import num_tasks
 from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
+from lerobot_predvla.sims.libero.object_shift import PATTERNS, ShiftSpec
 from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH
 from lerobot_predvla.utils.io import atomic_write_json
 
@@ -85,6 +86,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help="fixture poses of the episode on state k: seed + k")
     p.add_argument("--half-turn", choices=HALF_TURN_RULES, default=DEFAULT_HALF_TURN,
                    help="the expert's grasp rule when recording a plan (as `predvla demos --half-turn`)")
+    p.add_argument("--object-shift-cm", type=float, default=0.0,
+                   help="shift the object to pick on the replay states by this many cm, as lerobot-eval's "
+                        "--env.object_shift_cm does on official init state k (default 0: none)")
+    p.add_argument("--object-shift-pattern", choices=PATTERNS, default="ring", help="as --env.object_shift_pattern")
+    p.add_argument("--object-shift-directions", type=int, default=8, help="as --env.object_shift_directions")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT})")
     p.set_defaults(func=run)
 
@@ -103,6 +109,9 @@ def command_line(args: argparse.Namespace) -> str:
         words += ["--cap", str(args.cap)]
     if args.seed != 0:
         words += ["--seed", str(args.seed)]
+    if args.object_shift_cm:
+        words += ["--object-shift-cm", f"{args.object_shift_cm:g}", "--object-shift-pattern", args.object_shift_pattern,
+                  "--object-shift-directions", str(args.object_shift_directions)]
     if args.out != DEFAULT_OUT:
         words += ["--out", str(args.out)]
     return shlex.join(words)
@@ -117,8 +126,13 @@ def run(args: argparse.Namespace) -> int:
     if args.source_state in states:
         raise SystemExit(f"--states {','.join(map(str, states))} includes --source-state {args.source_state}: the "
                          "state-0 plan is replayed on states other than its own")
+    try:
+        shift = ShiftSpec(object_cm=args.object_shift_cm, pattern=args.object_shift_pattern,
+                          directions=args.object_shift_directions)
+    except ValueError as err:
+        raise SystemExit(str(err).replace("--env.object_shift_", "--object-shift-").replace("_", "-")) from err
     settings = Settings(states=states, source_state=args.source_state, cap=args.cap, seed=args.seed,
-                        half_turn=args.half_turn)
+                        half_turn=args.half_turn, shift=shift)
     expected = {suite: num_tasks(suite) for suite in args.suites}
     jobs = []
     for suite in args.suites:

@@ -14,6 +14,7 @@ from lerobot_predvla.report.figures import (
 from lerobot_predvla.report.formatting import MISSING
 from lerobot_predvla.report.paired import paired_episodes
 from lerobot_predvla.report.results import SUMMARY_FILE, Results, load_plan, load_records
+from lerobot_predvla.report.robustness import ROBUSTNESS_FIGURE, robustness_figure, robustness_table
 from lerobot_predvla.report.sections import (
     START_SPREAD_FILE,
     fresh_clone_section,
@@ -58,6 +59,8 @@ def write_report(runs_dir: Path, out: Path) -> dict:
         "tasks": task_figure(results, out / FIGURES["tasks"]),
     }
     summary["figures"] = {k: FIGURES[k] for k, ok in made.items() if ok}
+    if robustness_figure(records, out / ROBUSTNESS_FIGURE):
+        summary["figures"]["robustness"] = ROBUSTNESS_FIGURE
     missing = [
         f"{name}/{suite}/seed{seed}"
         for name, c in summary["configs"].items()
@@ -110,6 +113,14 @@ def write_report(runs_dir: Path, out: Path) -> dict:
             "sign test: exact, two-sided, on the episodes that succeed in only one.",
         ),
         (
+            "Robustness: shifted objects and LIBERO-PRO / LIBERO-plus variants",
+            robustness_table(records),
+            "robustness",
+            "Success in % (successes/episodes, pooled over seeds) per condition: the object to pick shifted by the "
+            "distance shown from each official init state, or a LIBERO-PRO / LIBERO-plus variant of the suite; "
+            "unsettled: episodes whose shifted object did not rest where it was put (docs/evaluation.md).",
+        ),
+        (
             "Corrupted observations",
             corruption_table(summary),
             "corruption",
@@ -132,7 +143,7 @@ def write_report(runs_dir: Path, out: Path) -> dict:
         if table is not None:
             sections += ["", table]
         if has_figure:
-            sections += ["", f"![{title}]({FIGURES[figure]})"]
+            sections += ["", f"![{title}]({summary['figures'][figure]})"]
     sections += starts_section(out / START_SPREAD_FILE) + mechanism_section(out) + lr_selection_section(runs_dir)
     stages = stages_section(records, runs_dir)
     if stages:

@@ -24,6 +24,16 @@ def episode_successes(path: Path) -> dict[str, list[bool]]:
     return dict(sorted(tasks.items(), key=lambda kv: int(kv[0])))
 
 
+def unsettled_episodes(path: Path) -> int:
+    """Episodes whose shifted bodies did not settle where they were put (`predvla_shifts`, written by `predvla_libero`
+    with `--env.object_shift_cm`); 0 without shifts."""
+    try:
+        shifts = json.loads(Path(path).read_text()).get("predvla_shifts") or {}
+        return len(shifts.get("unsettled_episodes", []))
+    except (OSError, ValueError, AttributeError) as err:
+        raise EvalInfoError(f"{path}: unreadable {EVAL_INFO_FILE} ({err}).") from err
+
+
 def parse_eval_info(path: Path) -> dict[str, dict[str, int]]:
     """Per-task successes, sorted by task id: {task_id: {"successes": s, "episodes": n}}."""
     return {task: {"successes": sum(s), "episodes": len(s)} for task, s in episode_successes(path).items()}

@@ -16,7 +16,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lerobot_predvla import lerobot_commands
-from lerobot_predvla.sweep.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info
+from lerobot_predvla.sweep.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info, unsettled_episodes
 from lerobot_predvla.sweep.layout import EVAL_WALL_FILE
 from lerobot_predvla.sweep.spec import ConfigSpec, Run, SweepError
 from lerobot_predvla.sweep.workspace import Workspace
@@ -42,14 +42,14 @@ class Evaluation(Workspace):
             device=s.eval_device,
             policy=[*lerobot_commands.field_args(spec.eval_overrides), *self.corruption_args(spec, run.suite)],
             env_type=s.env_type,
-            suite=run.suite,
+            suite=spec.env_task(run.suite),
             episode_length=s.episode_length,
             init_states=spec.init_states,
             n_episodes=spec.n_episodes or s.n_episodes,
             batch_size=s.eval_batch_size,
             seed=run.seed if spec.eval_seed is None else spec.eval_seed,
             output_dir=out or self.eval_dir(run),
-            extra=[*s.eval_args, *spec.eval_args, *extra],
+            extra=[*s.eval_args, *spec.eval_args, *spec.shift_args(), *extra],
         )
 
     def corruption_args(self, spec: ConfigSpec, suite: str) -> list[str]:
@@ -132,6 +132,8 @@ class Evaluation(Workspace):
             "eval_overrides": spec.eval_overrides,
             "init_states": spec.init_states,
             "corruption": spec.corruption,
+            "object_shift": spec.object_shift,
+            "variant": spec.variant,
         }
         extending = self.sweep.settings.eval_tasks is not None and self.record_path(run).is_file()
         earlier = self.read_record(run) if extending else None
@@ -149,6 +151,7 @@ class Evaluation(Workspace):
         if not all(finished):
             return False
         tasks, walls = self.part_results([out for out, _ in parts])
+        unsettled = sum(unsettled_episodes(out / EVAL_INFO_FILE) for out, _ in parts)
         commands = [command for _, command in parts]
         eval_tasks = self.sweep.settings.eval_tasks
         if earlier is not None:  # the earlier record's other tasks, with their commands and wall time
@@ -159,6 +162,9 @@ class Evaluation(Workspace):
             commands = [*earlier_commands, *(commands[i] for i in new)]
             walls = [("", earlier.get("eval_wall_s") or 0.0), *(walls[i] for i in new)]
             tasks = dict(sorted({**earlier["tasks"], **tasks}.items(), key=lambda kv: int(kv[0])))
+            unsettled = sum(unsettled_episodes(out / EVAL_INFO_FILE) for out, _ in parts
+                            if next(iter(parse_eval_info(out / EVAL_INFO_FILE))) not in earlier["tasks"]) + (
+                earlier.get("shift_unsettled") or 0)
             eval_tasks = sorted(int(t) for t in tasks)
         successes, episodes = episode_totals(tasks.values())
         record = {
@@ -171,6 +177,9 @@ class Evaluation(Workspace):
             "corruption": spec.corruption,
             "eval_overrides": spec.eval_overrides,
             "init_states": spec.init_states,
+            "object_shift": spec.object_shift,  # with the episodes whose shifted bodies did not settle (unsettled)
+            "shift_unsettled": unsettled if spec.object_shift else None,
+            "variant": spec.variant,
             "eval_seed": protocol["eval_seed"],
             "checkpoint_from": spec.checkpoint_from,
             "suite": run.suite,

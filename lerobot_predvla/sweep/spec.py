@@ -17,12 +17,15 @@ from lerobot_predvla.lerobot_commands import policy_args
 from lerobot_predvla.policies.recipe import NOT_RECIPE
 from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
 from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE, STYLES
+from lerobot_predvla.sims.libero.object_shift import ShiftSpec
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK
+from lerobot_predvla.sims.libero.variants import parse_variant
 from lerobot_predvla.sweep.lr_selection import LRSweep, candidate_name
 
 PAPER_TRAIN_STEPS = 30_000
 PAPER_BATCH_SIZE = 32
-GROUPS = ("main", "baseline", "ladder", "ablation", "corruption")
+# robustness: shown only in the report's robustness table (shifted objects, LIBERO-PRO / LIBERO-plus variants)
+GROUPS = ("main", "baseline", "ladder", "ablation", "corruption", "robustness")
 # The unrelated episode of a corruption run comes from another suite's dataset, so it is unrelated to every task
 # of the evaluated suite (Section 4.4: "observations from an unrelated episode").
 CORRUPTION_SOURCE = {
@@ -32,6 +35,10 @@ CORRUPTION_SOURCE = {
     "libero_10": "libero_spatial",
 }
 CORRUPTION_KEYS = {"channel", "alpha", "source_suite", "episode", "open_loop"}
+# `object_shift` keys of a configuration -> the `predvla_libero` flags they become (lerobot_predvla/sims/libero/
+# object_shift.py).
+SHIFT_FLAGS = {"cm": "object_shift_cm", "target_cm": "target_shift_cm", "pattern": "object_shift_pattern",
+               "directions": "object_shift_directions", "tolerance_cm": "shift_tolerance_cm"}
 
 
 class SweepError(ValueError):
@@ -49,7 +56,7 @@ class ConfigSpec:
 
     Args:
         name: Unique name (a run directory component and the report's row label), e.g. `predvla`, `L3`, `A6`.
-        group: Report section: main, baseline, ladder, ablation or corruption.
+        group: Report section: main, baseline, ladder, ablation, corruption or robustness.
         label: Description shown in the report (e.g. "- Online ER (n_itr=0)").
         policy: A policy type (`predvla`) or a JSON file of policy fields with `type` (`configs/policy/L3.json`),
             turned into `--policy.type=... --policy.<field>=...`.
@@ -78,6 +85,12 @@ class ConfigSpec:
             steps: 10000, eval_split: 0.1}`): one candidate per rate, the one with the lowest held-out loss wins.
         paper: The paper's published success (%) of the same configuration per suite, `{libero_object: [89.24, 6.13]}`
             (mean and standard deviation over its seeds, or the mean alone); `predvla report` sets it beside ours.
+        object_shift: Evaluate with shifted objects (docs/evaluation.md): `{cm: 4, pattern: ring, directions: 20}`,
+            optional `target_cm` and `tolerance_cm`; becomes `--env.object_shift_cm=4 --env.object_shift_pattern=ring
+            ...` and is recorded. `{cm: 0}` is the unshifted cell of the same table.
+        variant: Evaluate on a LIBERO-PRO or LIBERO-plus variant of each suite: `pro_temp_x0.1`, `pro_swap`,
+            `plus_language_3`, ... (`--env.task=<suite>_<variant>`); recorded. Configurations with `object_shift` or
+            `variant` make `predvla report`'s robustness table, one row per label.
         pool_with: The configuration this one extends with further training seeds (the same model and evaluation,
             e.g. at fewer episodes per task: the same trained configuration, `init_states` and `eval_overrides` but
             for fields of where or how fast they compute): `predvla report` adds a row over the union of their seeds
@@ -108,10 +121,34 @@ class ConfigSpec:
     lr_sweep: LRSweep | None = None
     paper: dict[str, float | list[float]] = field(default_factory=dict)
     pool_with: str | None = None
+    object_shift: dict | None = None
+    variant: str | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.lr_sweep, dict):  # as read from a sweep file
             self.lr_sweep = LRSweep(**self.lr_sweep)
+
+    def env_task(self, suite: str) -> str:
+        """`--env.task` of this configuration's evaluation on `suite`: the suite, or its variant."""
+        return suite if self.variant is None else f"{suite}_{self.variant}"
+
+    def shift_args(self) -> list[str]:
+        """`--env.<flag>=<value>` of `object_shift`."""
+        return [f"--env.{SHIFT_FLAGS[k]}={v}" for k, v in (self.object_shift or {}).items()]
+
+    def shift_problem(self) -> str | None:
+        """Why `object_shift` is malformed, or None."""
+        if not isinstance(self.object_shift, dict) or "cm" not in self.object_shift:
+            return f"expected a mapping with `cm` and optional {sorted(set(SHIFT_FLAGS) - {'cm'})}"
+        unknown = sorted(set(self.object_shift) - set(SHIFT_FLAGS))
+        if unknown:
+            return f"unknown keys {unknown}; expected {sorted(SHIFT_FLAGS)}"
+        shift = {k: v for k, v in self.object_shift.items() if k != "cm"}
+        try:
+            ShiftSpec(object_cm=self.object_shift["cm"], **shift)
+        except (TypeError, ValueError) as err:
+            return str(err)
+        return None if self.init_states else "shifted objects start from the official init states (init_states: true)"
 
     def policy_args(self, base_dir: Path, suite: str) -> list[str]:
         if self.policy.endswith(".json"):
@@ -381,6 +418,16 @@ class Sweep:
                 self.validate_corruption(spec, where)
             if spec.lr_sweep is not None:
                 self.validate_lr_sweep(spec, where)
+            problem = None if spec.object_shift is None else spec.shift_problem()
+            if problem:
+                raise SweepError(f"{where}: configuration {spec.name}: object_shift {spec.object_shift!r}: {problem}.")
+            for suite in self.suites_of(spec) if spec.variant is not None else []:
+                if parse_variant(spec.env_task(suite)) is None:
+                    raise SweepError(
+                        f"{where}: configuration {spec.name}: variant {spec.variant!r} is not a LIBERO-PRO or "
+                        f"LIBERO-plus variant name (pro_<folder>, e.g. pro_temp_x0.1, or plus_<variant>, e.g. "
+                        f"plus_language_3; docs/evaluation.md)."
+                    )
             for suite, value in spec.paper.items():
                 numbers = value if isinstance(value, list) else [value]
                 if (

@@ -15,19 +15,23 @@ Two plans per task, both chosen before any outcome is seen:
   episode fewer).
 
 Each plan is also replayed on its own source state: it must reproduce the expert's success there (a check that the
-replay is exact). Fixture poses (which resets jitter outside the simulator state) are drawn from numpy's generator
+replay is exact). With `Settings.shift` (`predvla blind-replay --object-shift-cm`), the replays on the other states
+start with the object to pick shifted as `predvla_libero --env.object_shift_cm` shifts it in episode k on official
+init state k (`object_shift`), and each task's file records per state how the shifted object settled (`shifts`).
+Fixture poses (which resets jitter outside the simulator state) are drawn from numpy's generator
 seeded with `seed + state` before every reset, so a given state starts alike whichever plan runs on it.
 """
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.sims.libero.env import make_env, official_init_states, task_spec
+from lerobot_predvla.sims.libero.object_shift import ShiftedResets, ShiftSpec
 from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH, SUITE_LABELS
 from lerobot_predvla.sims.libero.rollout import IDLE, SETTLE_STEPS, run_episode
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
@@ -51,10 +55,12 @@ class Settings:
     settle_steps: int = SETTLE_STEPS
     seed: int = 0
     half_turn: str = "nearest"
+    shift: ShiftSpec = ShiftSpec()  # the object to pick moved on the replay states (`object_shift`)
 
     def as_dict(self) -> dict:
+        shift = {"shift": asdict(self.shift)} if self.shift.active else {}  # unshifted results keep their settings
         return {"states": list(self.states), "source_state": self.source_state, "cap": self.cap,
-                "settle_steps": self.settle_steps, "seed": self.seed, "half_turn": self.half_turn}
+                "settle_steps": self.settle_steps, "seed": self.seed, "half_turn": self.half_turn, **shift}
 
 
 def task_path(out: Path, suite: str, task_id: int) -> Path:
@@ -103,6 +109,21 @@ def replay(env, init_state: np.ndarray, actions: np.ndarray, seed: int, settings
     _reset(env, init_state, seed)
     for _ in range(settings.settle_steps):
         env.step(IDLE)
+    return _play(env, actions, settings)
+
+
+def replay_shifted(env, init_state: np.ndarray, actions: np.ndarray, seed: int, settings: Settings,
+                   shifts: ShiftedResets, episode: int) -> tuple[int | None, dict]:
+    """`replay` from `init_state` with episode `episode`'s shift (`object_shift`); also how the shifted object
+    settled (`ShiftedResets.settle`, after the settle steps)."""
+    _reset(env, shifts.shifted(env, init_state, episode), seed)
+    for _ in range(settings.settle_steps):
+        env.step(IDLE)
+    settled = shifts.settle(env)
+    return _play(env, actions, settings), {k: v for k, v in settled.items() if k != "spec"}
+
+
+def _play(env, actions: np.ndarray, settings: Settings) -> int | None:
     for t in range(settings.cap):
         env.step(actions[t] if t < len(actions) else IDLE)
         if env.check_success():
@@ -132,9 +153,15 @@ def run_task(suite: str, task_id: int, settings: Settings, progress=None) -> dic
             own = replay(env, init_states[source], plan["actions"], settings.seed + source, settings)
             tick()
             states = [s for s in settings.states if s != source]
-            outcomes = {}
+            outcomes, settles = {}, {}
             for state in states:
-                outcomes[str(state)] = replay(env, init_states[state], plan["actions"], settings.seed + state, settings)
+                if settings.shift.active:  # episode index = the state's, as lerobot-eval's episode k on state k
+                    outcomes[str(state)], settles[str(state)] = replay_shifted(
+                        env, init_states[state], plan["actions"], settings.seed + state, settings,
+                        ShiftedResets(settings.shift), state)
+                else:
+                    outcomes[str(state)] = replay(env, init_states[state], plan["actions"], settings.seed + state,
+                                                  settings)
                 tick()
             plans[name] = {
                 "source_state": source, "source_success": plan["success"], "source_steps": plan["steps"],
@@ -143,6 +170,7 @@ def run_task(suite: str, task_id: int, settings: Settings, progress=None) -> dic
                 "states": states, "success_step": outcomes,
                 "successes": sum(v is not None for v in outcomes.values()), "episodes": len(outcomes),
                 "plan": plan["actions"].round(6).tolist(),
+                **({"shifts": settles} if settles else {}),
             }
     finally:
         env.close()

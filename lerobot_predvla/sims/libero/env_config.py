@@ -39,6 +39,7 @@ from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 
 from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM
 from lerobot_predvla.sims.libero.fault_injection import FaultInjectionStep
+from lerobot_predvla.sims.libero.object_shift import ShiftSpec
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
 
 OBS_ROBOT_STATE = "observation.robot_state"
@@ -90,6 +91,18 @@ class PredVLALiberoEnv(LiberoEnv):
         oracle: Also observe the objects of interest's poses relative to the gripper
             (`observation.environment_state`), which a policy trained with the oracle front end (`predvla convert
             --oracle`, a diagnostic) reads instead of its cameras; False (default) for every other policy.
+        object_shift_cm: Move the object to pick by this many cm from each official init state (`object_shift`);
+            0 (default) moves nothing.
+        target_shift_cm: Move the place target (libero_object's basket) by this many cm, opposite the object's
+            direction; 0 (default) moves nothing.
+        object_shift_pattern: Directions per episode: "ring" (episode k at 360 * k / object_shift_directions
+            degrees) or "cross" (+x, -x, +y, -y in turn).
+        object_shift_directions: Directions of the ring (8).
+        shift_tolerance_cm: How far a shifted body may move while it settles before its episode is reported as
+            unsettled (1 cm).
+
+    `--env.task` also takes LIBERO-PRO and LIBERO-plus variants, e.g. `libero_object_pro_temp_x0.1` or
+    `libero_object_plus_language_3` (`variants`).
     """
 
     render_interval: int = 4
@@ -99,6 +112,11 @@ class PredVLALiberoEnv(LiberoEnv):
     fault_mode: str = "nan"
     fault_seed: int = 0
     oracle: bool = False
+    object_shift_cm: float = 0.0
+    target_shift_cm: float = 0.0
+    object_shift_pattern: str = "ring"
+    object_shift_directions: int = 8
+    shift_tolerance_cm: float = 1.0
 
     def __post_init__(self):
         super().__post_init__()
@@ -107,6 +125,15 @@ class PredVLALiberoEnv(LiberoEnv):
         if self.obs_type != "pixels_agent_pos":
             raise ValueError(f"--env.obs_type must be 'pixels_agent_pos' for predvla_libero, got {self.obs_type!r}.")
         self.fault_injection()  # validates fault_rate and fault_mode
+        if self.shift().active and not self.init_states:
+            raise ValueError("--env.object_shift_cm / --env.target_shift_cm move objects from the official init "
+                             "states: they need --env.init_states=true.")
+
+    def shift(self) -> ShiftSpec:
+        """The shift of `--env.object_shift_*` (validated here)."""
+        return ShiftSpec(object_cm=self.object_shift_cm, target_cm=self.target_shift_cm,
+                         pattern=self.object_shift_pattern, directions=self.object_shift_directions,
+                         tolerance_cm=self.shift_tolerance_cm)
 
     def fault_injection(self) -> FaultInjectionStep | None:
         if self.fault_rate == 0.0:
@@ -115,7 +142,8 @@ class PredVLALiberoEnv(LiberoEnv):
 
     @property
     def gym_kwargs(self) -> dict:
-        return {**super().gym_kwargs, "render_interval": self.render_interval, "oracle": self.oracle}
+        return {**super().gym_kwargs, "render_interval": self.render_interval, "oracle": self.oracle,
+                "shift": self.shift()}
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False):
         # The simulator (LIBERO, robosuite, MuJoCo), loaded once an env is built: registering the type loads none.

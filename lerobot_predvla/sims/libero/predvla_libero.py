@@ -26,7 +26,9 @@ from gymnasium import spaces
 
 from lerobot_predvla.frontend.oracle import POSE_DIM
 from lerobot_predvla.sims.libero.env import check_libero_config, use_headless_gl
+from lerobot_predvla.sims.libero.object_shift import ShiftedResets, ShiftSpec
 from lerobot_predvla.sims.libero.oracle import object_poses, objects_of_interest
+from lerobot_predvla.sims.libero.variants import variant_suite
 
 check_libero_config()  # before LIBERO reads its config: a stale one otherwise fails deep inside a reset
 use_headless_gl()  # before robosuite chooses its GL context
@@ -185,10 +187,20 @@ class SparseRenderLiberoEnv(LiberoEnv):
 
     With `oracle`, every observation also carries the objects of interest's poses relative to the gripper
     (`environment_state`, `libero.oracle.object_poses`): the inputs of the oracle front end, a diagnostic.
+
+    With an active `shift` (`object_shift.ShiftSpec`), each episode starts from its official init state with the object
+    to pick (and/or its place target) moved; `shift_records` keeps one record per counted episode.
     """
 
-    def __init__(self, *args, render_interval: int = 4, oracle: bool = False, **kwargs):
+    def __init__(self, *args, render_interval: int = 4, oracle: bool = False, shift: ShiftSpec | None = None,
+                 **kwargs):
         super().__init__(*args, **kwargs)
+        if shift is not None and shift.active and not self.init_states:
+            raise ValueError("--env.object_shift_cm / --env.target_shift_cm move objects from the official init "
+                             "states: they need --env.init_states=true.")
+        self.shifts = ShiftedResets(shift) if shift is not None and shift.active else None
+        self.shift_records: list[dict] = []
+        self._official_states = None if self.shifts is None else np.array(self._init_states, copy=True)
         self.render_interval = render_interval
         self.oracle_objects = objects_of_interest(robosuite_parse_problem(self._task_bddl_file)) if oracle else []
         if oracle:
@@ -257,15 +269,38 @@ class SparseRenderLiberoEnv(LiberoEnv):
     def reset(self, seed=None, options=None, **kwargs):
         self._counted = bool((options or {}).get(NEW_ROLLOUT_OPTION))
         self._rollouts += self._counted
+        if self._counted:  # Gymnasium's autoresets (extra episodes lerobot-eval discards) moved init_state_id on
+            self.init_state_id = (self._rollouts - 1) * self._reset_stride + self.episode_index
         self._steps_since_reset, self._images, self._render_key = 0, None, None
+        episode = self.init_state_id  # LiberoEnv.reset starts from official init state episode % 50, then moves on
         try:
+            self._shift_start(episode)
             observation, info = super().reset(seed=seed, **kwargs)
         except Exception as err:  # noqa: BLE001  (a simulator left broken by a fault: rebuild it once)
             logging.warning("predvla_libero: reset failed (%s: %s); rebuilding the simulator.", type(err).__name__, err)
             self._drop_simulator()
+            self.init_state_id = episode
+            self._shift_start(episode)
             observation, info = super().reset(seed=seed, **kwargs)
+        if self.shifts is not None:
+            record = {"episode_ix": episode, "task": self.task, "task_id": self.task_id,
+                      "init_state": episode % len(self._official_states), **self.shifts.settle(self._env)}
+            info = {**info, "shift_settled": record["settled"]}
+            if self._counted:
+                self.shift_records.append(record)
+                if not record["settled"]:
+                    logging.warning("predvla_libero: a shifted body did not settle where it was put: %s", record)
         self._last_observation = observation
         return observation, info
+
+    def _shift_start(self, episode: int) -> None:
+        """Put this episode's shifted state where `LiberoEnv.reset` takes its official init state from."""
+        if self.shifts is None:
+            return
+        self._ensure_env()
+        index = episode % len(self._official_states)
+        self._init_states = self._official_states.copy()
+        self._init_states[index] = self.shifts.shifted(self._env, self._official_states[index], episode)
 
     def step(self, action: np.ndarray):
         self._steps_since_reset += 1
@@ -318,7 +353,8 @@ def create_envs(cfg, n_envs: int, env_cls) -> dict[str, dict[int, gym.vector.Vec
     task_ids = kwargs.pop("task_ids", None)
     out: dict[str, dict[int, gym.vector.VectorEnv]] = {}
     for suite_name in [s.strip() for s in str(cfg.task).split(",") if s.strip()]:
-        suite = _get_suite(suite_name)
+        # A LIBERO-PRO or LIBERO-plus variant (`variants`) runs with its base suite's step cap.
+        suite, base_name = variant_suite(suite_name) or (_get_suite(suite_name), suite_name)
         out[suite_name] = {}
         for task_id in _select_task_ids(len(suite.tasks), task_ids):
             fns = [
@@ -326,7 +362,7 @@ def create_envs(cfg, n_envs: int, env_cls) -> dict[str, dict[int, gym.vector.Vec
                     SparseRenderLiberoEnv,
                     task_suite=suite,
                     task_id=task_id,
-                    task_suite_name=suite_name,
+                    task_suite_name=base_name,
                     camera_name=camera_names,
                     init_states=cfg.init_states,
                     episode_length=cfg.episode_length,

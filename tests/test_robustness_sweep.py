@@ -1,0 +1,135 @@
+"""Sweep entries with shifted objects or LIBERO-PRO / LIBERO-plus variants, and the report's robustness table (fake
+lerobot-eval, fake records)."""
+
+import json
+from pathlib import Path
+
+import pytest
+from sweep_factory import FakeLeRobot, arg, sweep_file
+
+from lerobot_predvla.report import write_report
+from lerobot_predvla.report.formatting import MISSING
+from lerobot_predvla.report.robustness import robustness_figure, robustness_table
+from lerobot_predvla.sweep import Runner, Sweep, SweepError
+
+POLICY = "PredVLA, exact open loop"
+CONFIGS = [
+    {"name": "predvla", "group": "main"},
+    {"name": "shift0", "group": "robustness", "label": POLICY, "checkpoint_from": "predvla",
+     "eval_overrides": {"er_iterations": 0}, "object_shift": {"cm": 0}},
+    {"name": "shift4", "group": "robustness", "label": POLICY, "checkpoint_from": "predvla",
+     "eval_overrides": {"er_iterations": 0}, "object_shift": {"cm": 4, "pattern": "ring", "directions": 20}},
+    {"name": "pro_x01", "group": "robustness", "label": POLICY, "checkpoint_from": "predvla",
+     "eval_overrides": {"er_iterations": 0}, "variant": "pro_temp_x0.1"},
+]
+
+
+class FakeShiftedEval(FakeLeRobot):
+    """lerobot-eval that also writes `predvla_shifts` with one unsettled episode when objects are shifted."""
+
+    def __call__(self, command: list[str], log: Path) -> int:
+        code = super().__call__(command, log)
+        cm = arg(command, "env.object_shift_cm")
+        if any(c.endswith("lerobot-eval") for c in command) and cm not in (None, "0"):
+            path = Path(arg(command, "output_dir")) / "eval_info.json"
+            info = json.loads(path.read_text())
+            info["predvla_shifts"] = {"episodes": [], "unsettled_episodes": [{"task_id": 0, "episode_ix": 3}]}
+            path.write_text(json.dumps(info))
+        return code
+
+
+def test_shift_and_variant_entries_become_env_flags_records_and_their_own_table(tmp_path):
+    sweep = Sweep.load(sweep_file(tmp_path, seeds=[0], suites=["libero_object"], configs=CONFIGS))
+    fake = FakeShiftedEval()
+    outcome = Runner(sweep, tmp_path / "runs", execute=fake).run(progress=False)
+    assert not outcome["failed"] and len(outcome["done"]) == 4
+    evals = {arg(c, "output_dir").split("/eval/")[1].split("/")[0]: c for c in fake.commands if arg(c, "seed")
+             and any(w.endswith("lerobot-eval") for w in c)}
+    assert "--env.object_shift_cm=4" in evals["shift4"] and "--env.object_shift_pattern=ring" in evals["shift4"]
+    assert "--env.object_shift_directions=20" in evals["shift4"] and "--env.object_shift_cm=0" in evals["shift0"]
+    assert arg(evals["pro_x01"], "env.task") == "libero_object_pro_temp_x0.1"
+    assert not any(a.startswith("--env.object_shift") for a in evals["pro_x01"] + evals["predvla"])
+    record = json.loads((tmp_path / "runs/records/shift4/libero_object/seed0.json").read_text())
+    assert record["object_shift"] == {"cm": 4, "pattern": "ring", "directions": 20}
+    assert record["shift_unsettled"] == 1 and record["variant"] is None
+    assert json.loads((tmp_path / "runs/records/pro_x01/libero_object/seed0.json").read_text())["variant"] == \
+        "pro_temp_x0.1"
+
+    summary = write_report(tmp_path / "runs", tmp_path / "report")
+    report = (tmp_path / "report" / "report.md").read_text()
+    section = report.split("## Robustness")[1].split("\n## ")[0]
+    # fake successes: task t, seed 0 succeeds in 50 - t of 50 episodes (tasks 0-2): 147/150
+    assert f"| {POLICY} | object | 98.0 (147/150) | 98.0 (147/150), 1 unsettled | 98.0 (147/150) |" in section
+    assert "| Policy | Suite | 0 cm | 4 cm | pro_temp_x0.1 |" in section
+    assert summary["figures"]["robustness"] == "success_vs_shift.png"
+    assert (tmp_path / "report" / "success_vs_shift.png").is_file()
+    main = report.split("## Main results")[1].split("\n## ")[0]
+    assert POLICY not in main  # robustness runs are left out of the main table
+
+
+def _record(label: str, suite: str, cm: float | None, successes: int, variant: str | None = None, **extra) -> dict:
+    return {"config": f"{label}_{cm}_{variant}", "label": label, "suite": suite, "seed": 0,
+            "object_shift": None if cm is None else {"cm": cm}, "variant": variant,
+            "tasks": {"0": {"successes": successes, "episodes": 20}}, **extra}
+
+
+def test_robustness_table_pools_seeds_orders_conditions_and_leaves_other_runs_out(tmp_path):
+    records = [
+        _record("BC", "libero_object", 4, 10, shift_unsettled=2),
+        _record("BC", "libero_object", 4, 5, seed=1),
+        _record("BC", "libero_object", 0, 20),
+        _record("BC", "libero_object", None, 12, variant="plus_language_3"),
+        _record("PredVLA", "libero_object", 2, 8),
+        {**_record("main", "libero_object", None, 20)},  # neither shifted nor a variant: not in the table
+    ]
+    text = robustness_table(records)
+    assert text.splitlines()[0] == "| Policy | Suite | 0 cm | 2 cm | 4 cm | plus_language_3 |"
+    assert f"| BC | object | 100.0 (20/20) | {MISSING} | 37.5 (15/40), 2 unsettled | 60.0 (12/20) |" in text
+    assert "main" not in text
+    assert robustness_table([_record("main", "libero_object", None, 20)]) is None
+    assert robustness_figure(records, tmp_path / "f.png") and (tmp_path / "f.png").is_file()
+    assert not robustness_figure([_record("P", "libero_object", 2, 8)], tmp_path / "g.png")  # one point: no line
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"object_shift": {"cm": 4, "angle": 3}}, "unknown keys \\['angle'\\]"),
+    ({"object_shift": {"cm": -1}}, "must be >= 0"),
+    ({"object_shift": {"cm": 2, "pattern": "spiral"}}, "object_shift_pattern"),
+    ({"object_shift": {"pattern": "ring"}}, "expected a mapping with `cm`"),
+    ({"object_shift": {"cm": 2}, "init_states": False}, "init_states: true"),
+    ({"variant": "temp_x0.1"}, "not a LIBERO-PRO or LIBERO-plus variant name"),
+])
+def test_bad_shift_or_variant_entries_name_the_configuration_and_the_problem(tmp_path, change, message):
+    configs = [{"name": "predvla"}, {"name": "bad", "group": "robustness", "checkpoint_from": "predvla", **change}]
+    with pytest.raises(SweepError, match=f"configuration bad: .*{message}"):
+        Sweep.load(sweep_file(tmp_path, configs=configs))
+
+
+def test_the_looking_sweep_measures_every_policy_under_every_condition_paired_with_the_open_loop(tmp_path):
+    """configs/sweeps/libero_object_looking.yaml (docs/research/looking.md): the committed trainings' configurations as
+    their sweeps trained them, 5 policies x (6 shifts + 8 variants) on the same 20 starts, each paired with PredVLA's
+    exact open loop of the same condition."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    looking, table2, reading = (Sweep.load(sweeps / f) for f in ("libero_object_looking.yaml",
+                                                                 "libero_object_table2.yaml",
+                                                                 "libero_object_reading_full.yaml"))
+    for name, twin in (("B1", table2.configs["B1"]), ("B2", table2.configs["B2"]),
+                       ("predvla_reading", reading.configs["predvla_reading"])):
+        ours = looking.configs[name]
+        assert (ours.policy, ours.steps, ours.lr_sweep) == (twin.policy, twin.steps, twin.lr_sweep), name
+    s = looking.settings
+    assert (s.n_episodes, s.eval_tasks, s.episode_length, s.seeds) == (4, [0, 2, 4, 6, 8], 600, [0])
+    rows: dict[str, set] = {}
+    for spec in looking.configs.values():
+        assert spec.group == "robustness" and spec.init_states and spec.n_episodes is None
+        shift = spec.object_shift or {}
+        assert (shift.get("pattern"), shift.get("directions")) in ((None, None), ("ring", 4))
+        rows.setdefault(spec.label, set()).add(spec.variant or shift["cm"])
+        if spec.compare_to is not None:
+            reference = looking.configs[spec.compare_to]
+            assert (reference.object_shift, reference.variant) == (spec.object_shift, spec.variant), spec.name
+            assert reference.eval_overrides == {"er_iterations": 0}, spec.name
+    conditions = {0, 1, 2, 3, 4, 6, "pro_temp_x0.1", "pro_temp_x0.2", "pro_temp_y0.1", "pro_temp_y0.2", "pro_swap",
+                  "pro_lan", "pro_with_yellow_book", "plus_language_1"}
+    assert len(rows) == 5 and all(row == conditions for row in rows.values())
+    assert len(looking.configs) == 5 * len(conditions)
