@@ -244,7 +244,7 @@ DEFAULT_OUT = Path("results/demonstrations")
 COMMITTED_BLIND = Path("results/blind_replay")
 
 
-def parse_args(argv: list[str] | None) -> argparse.Namespace:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m research.demo_styles", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tasks", type=_ints("--tasks"), default=[0, 1, 2],
@@ -254,11 +254,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--blind-states", type=_ints("--blind-states"), default=list(range(1, 20)),
                    help="official init states the teleop plan from state 0 is replayed on (default 1-19)")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT})")
-    return p.parse_args(argv)
+    return p
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+    args = build_parser().parse_args(argv)
     if args.per_task < 2:
         raise SystemExit(f"--per-task must be >= 2 (a spread needs two demonstrations), got {args.per_task}")
     committed = task_path(COMMITTED_BLIND, "libero_object", args.tasks[0])

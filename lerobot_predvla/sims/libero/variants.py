@@ -26,6 +26,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from lerobot_predvla.columns import SUITES
@@ -127,6 +128,17 @@ def missing_parts(bddl: Path) -> list[str]:
     return missing + [f"object class {c!r}" for c in problem["objects"] if c not in OBJECTS_DICT]
 
 
+def load_init_states(path: Path) -> np.ndarray:
+    """A LIBERO init-state file (a pickled numpy array, `torch.save`d), read without unpickling anything but the
+    array: `weights_only=True` with numpy's array reconstruction allowed under the name the files use."""
+    from numpy._core.multiarray import _reconstruct
+
+    array_globals = [(_reconstruct, "numpy.core.multiarray._reconstruct"), np.ndarray, np.dtype,
+                     type(np.dtype(np.float64))]
+    with torch.serialization.safe_globals(array_globals):
+        return torch.load(path, weights_only=True)
+
+
 def variant_suite(task: str):
     """(a LIBERO benchmark of the variant's tasks, its base suite's name) for a variant task name; None for a suite.
 
@@ -143,7 +155,7 @@ def variant_suite(task: str):
     official_inits = Path(libero_pkg.get_libero_path("init_states"))
     tasks = []
     for task_spec, (bddl, init) in zip(base.tasks, variant_files(name, base.tasks, official_inits), strict=True):
-        if not init.is_file() or len(torch.load(init, weights_only=False)) == 0:  # nosec B614 (a numpy array)
+        if not init.is_file() or len(load_init_states(init)) == 0:
             raise ValueError(f"--env.task={name.name}: init states {init} missing or empty for {bddl.name}.")
         missing = missing_parts(bddl)
         if missing:
