@@ -365,25 +365,15 @@ class Sweep:
                     f"{{suite}} and {{seed}} to fill in ({err!r})."
                 ) from err
         for suite, spec in settings.data.items():
-            if spec.half_turn not in HALF_TURN_RULES:
-                raise SweepError(
-                    f"{path}: data.{suite}.half_turn must be one of {HALF_TURN_RULES}, got {spec.half_turn!r}."
-                )
-            if spec.hold_steps < 0:
-                raise SweepError(f"{path}: data.{suite}.hold_steps must be >= 0, got {spec.hold_steps}.")
-            if spec.style not in STYLES:
-                raise SweepError(f"{path}: data.{suite}.style must be one of {STYLES}, got {spec.style!r}.")
-            if spec.diversity < 0 or spec.placement_spread < 0:
-                raise SweepError(f"{path}: data.{suite}.diversity and placement_spread must be >= 0, got "
-                                 f"{spec.diversity} and {spec.placement_spread}.")
-            if spec.workers < 1:
-                raise SweepError(f"{path}: data.{suite}.workers must be >= 1, got {spec.workers}.")
-            if spec.frontend_threads < 1:
-                raise SweepError(f"{path}: data.{suite}.frontend_threads must be >= 1, got {spec.frontend_threads}.")
-            if spec.image_storage not in IMAGE_STORAGES:
-                raise SweepError(
-                    f"{path}: data.{suite}.image_storage must be one of {IMAGE_STORAGES}, got {spec.image_storage!r}."
-                )
+            for name, choices in (("half_turn", HALF_TURN_RULES), ("style", STYLES), ("image_storage", IMAGE_STORAGES)):
+                if getattr(spec, name) not in choices:
+                    raise SweepError(
+                        f"{path}: data.{suite}.{name} must be one of {choices}, got {getattr(spec, name)!r}."
+                    )
+            for name, least in (("hold_steps", 0), ("diversity", 0), ("placement_spread", 0), ("workers", 1),
+                                ("frontend_threads", 1)):
+                if getattr(spec, name) < least:
+                    raise SweepError(f"{path}: data.{suite}.{name} must be >= {least}, got {getattr(spec, name)}.")
         sweep = cls(settings, {}, path.parent)
         for spec in configs:
             if spec.name in sweep.configs:
