@@ -96,8 +96,9 @@ def ratio_text(other: dict, own: dict | None) -> str:
 
 
 def _states_text(states: list[int]) -> str:
-    return f"{states[0]}-{states[-1]}" if states == list(range(states[0], states[-1] + 1)) else ", ".join(
-        map(str, states))
+    if len(states) > 1 and states == list(range(states[0], states[-1] + 1)):
+        return f"{states[0]}-{states[-1]}"
+    return ", ".join(map(str, states))
 
 
 def markdown(report: dict, command: str) -> str:
@@ -106,24 +107,26 @@ def markdown(report: dict, command: str) -> str:
              "0) replayed action by action, with no observation, on the official init states of every other task of "
              "the same scene (the *evaluated task*), success judged by the evaluated task's goal. *Own plan*: the "
              "evaluated task's own state-0 plan on the same states, from the own-task blind replay (the same "
-             "episodes; no instruction is needed there either). A policy that ignores the instruction can reach "
-             "at best the own-plan rate on a task's own starts; what it gets on a task from the other tasks' "
-             "motions is the *other plans* rate.", "", "Reproduce:", "", "```bash", command, "```", ""]
+             "episodes). The other plans' rate is what another task's motion, done well and blind, gets by the "
+             "evaluated task's goal: what a policy that follows a wrong instruction can expect by chance, while a "
+             "policy that ignores the instruction scores the same whichever it is given.", "", "Reproduce:", "", "```bash", command, "```", ""]
     for suite, r in report.items():
         tasks = r["tasks"]
         lines += [f"## {suite}", "",
                   f"Replay states {_states_text(r['states'])}, {r['cap']}-step cap. Other tasks' plans: "
                   f"**{_pct(r['other_plans'])}**; each task's own plan on the same states: "
-                  f"**{_pct(r['own_plan_same_states'])}** (on its own-task states: {_pct(r['own_plan'])}). Ratio "
-                  f"other / own: {ratio_text(r['other_plans'], r['own_plan_same_states'])} (the target for a "
-                  f"policy: at most {TARGET_RATIO} per task).", "",
+                  f"**{_pct(r['own_plan_same_states'])}**, on the own-task run's states {_pct(r['own_plan'])}. Ratio "
+                  f"other / own: {ratio_text(r['other_plans'], r['own_plan_same_states'])} on the same states, "
+                  f"{ratio_text(r['other_plans'], r['own_plan'])} against the own-task run (the target for a "
+                  f"policy, with another task's instruction against its own: at most {TARGET_RATIO} per task).", "",
                   "| evaluated task | own plan, same states | own plan, own-task states | other plans | other / own "
-                  "| plans that succeed (successes) | name |", "|---|---|---|---|---|---|---|"]
+                  "(same states) | other / own (own-task states) | plans that succeed (successes) | name |",
+                  "|---|---|---|---|---|---|---|---|"]
         for b, t in tasks.items():
             winners = ", ".join(f"{a} ({c['successes']})" for a, c in t["by_plan"].items() if c["successes"]) or "none"
             lines.append(f"| {b} | {_pct(t['own_plan_same_states'])} | {_pct(t['own_plan'])} | "
                          f"{_pct(t['other_plans'])} | {ratio_text(t['other_plans'], t['own_plan_same_states'])} | "
-                         f"{winners} | {t['task_name']} |")
+                         f"{ratio_text(t['other_plans'], t['own_plan'])} | {winners} | {t['task_name']} |")
         evaluated = list(tasks)
         plan_tasks = sorted({a for t in tasks.values() for a in t["by_plan"]} | set(evaluated), key=int)
         lines += ["", "Successes per plan task (row) and evaluated task (column); the diagonal (italic) is the own "
