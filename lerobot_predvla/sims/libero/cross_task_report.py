@@ -106,10 +106,10 @@ def markdown(report: dict, command: str) -> str:
              "Each *plan task*'s scripted-expert plan (its actions from an official init state, `--source-state`, "
              "0 by default) replayed action by action, with no observation, on the official init states of every "
              "other task of the same scene (the *evaluated task*), success judged by the evaluated task's goal. "
-             "*Own plan*: the evaluated task's own state-0 plan on the same states, from the own-task blind replay "
-             "(the same episodes). The other plans' rate is what another task's motion, done well and blind, gets by the "
-             "evaluated task's goal: what a policy that follows a wrong instruction can expect by chance, while a "
-             "policy that ignores the instruction scores the same whichever it is given.", "",
+             "*Own plan*: the evaluated task's own state-0 plan on the same states, from the own-task blind replay"
+             " (the same episodes). The other plans' rate is what another task's motion, done well and blind, gets"
+             " by the evaluated task's goal: what a policy that follows a wrong instruction can expect by chance, "
+             "while a policy that ignores the instruction scores the same whichever it is given.", "",
              "Reproduce:", "", "```bash", command, "```", ""]
     for suite, r in report.items():
         tasks = r["tasks"]
