@@ -15,9 +15,9 @@ replayed on the official init states `--states` of every other task of the same 
 listed after the flag), success judged by the evaluated task's goal. Only tasks that share one scene are paired
 (libero_goal: all ten); other tasks are left out, and refused when listed after the flag. Writes
 OUT/plans/SUITE/taskA.json (the plan of task A), OUT/tasks/SUITE/taskB.json (evaluated task B, per plan task;
-resumable plan by plan), then OUT/report.json (plan task x evaluated task), OUT/report.md and OUT/cross_task.png, with each evaluated task's own plan on the same states read
-from the own-task results (`--own-out`, the same episodes: replays are deterministic). Default OUT:
-results/blind_replay_cross.
+resumable plan by plan), then OUT/report.json (plan task x evaluated task), OUT/report.md and OUT/cross_task.png, with
+each evaluated task's own plan on the same states read from the own-task results (`--own-out`, the same episodes:
+replays are deterministic). Default OUT: results/blind_replay_cross.
 
   predvla blind-replay --cross-task --suites libero_goal --states 1-2
   predvla blind-replay --cross-task 3,5 --suites libero_goal --tasks 0 --states 1
