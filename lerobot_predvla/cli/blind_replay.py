@@ -9,6 +9,18 @@ successes, episodes), OUT/report.md and OUT/blind_replay.png. Physics only, no r
 
   predvla blind-replay --suites libero_object
   predvla blind-replay   # all four suites, resuming
+
+`--cross-task`: what ignoring the instruction gets. The state-0 plan of each task in `--tasks` (the plan tasks) is
+replayed on the official init states `--states` of every other task of the same scene (or of the evaluated tasks
+listed after the flag), success judged by the evaluated task's goal. Only tasks that share one scene are paired
+(libero_goal: all ten); other tasks are left out, and refused when listed after the flag. Writes
+OUT/plans/SUITE/taskA.json (the plan of task A), OUT/tasks/SUITE/taskB.json (evaluated task B, per plan task;
+resumable plan by plan), then OUT/report.json (plan task x evaluated task), OUT/report.md and OUT/cross_task.png, with
+each evaluated task's own plan on the same states read from the own-task results (`--own-out`, the same episodes:
+replays are deterministic). Default OUT: results/blind_replay_cross.
+
+  predvla blind-replay --cross-task --suites libero_goal --states 1-2
+  predvla blind-replay --cross-task 3,5 --suites libero_goal --tasks 0 --states 1
 """
 
 import argparse
@@ -30,11 +42,20 @@ from lerobot_predvla.sims.libero.blind_replay import (
     task_path,
     write_report,
 )
+from lerobot_predvla.sims.libero.blind_replay_cross import (
+    DEFAULT_CROSS_OUT,
+    pairs_to_run,
+    plan_for,
+    run_evaluated_task,
+)
+from lerobot_predvla.sims.libero.cross_task_report import write_cross_report
 from lerobot_predvla.sims.libero.env import num_tasks
 from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
 from lerobot_predvla.sims.libero.object_shift import PATTERNS, ShiftSpec
 from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH
 from lerobot_predvla.utils.io import atomic_write_json
+
+ALL_OTHERS: tuple[int, ...] = ()  # --cross-task with no ids: every other task of the suite
 
 
 def _ints(flag: str):
@@ -91,7 +112,13 @@ def add_parser(subparsers) -> None:
                         "--env.object_shift_cm does on official init state k (default 0: none)")
     p.add_argument("--object-shift-pattern", choices=PATTERNS, default="ring", help="as --env.object_shift_pattern")
     p.add_argument("--object-shift-directions", type=int, default=8, help="as --env.object_shift_directions")
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT})")
+    p.add_argument("--cross-task", type=_ints("--cross-task"), nargs="?", const=ALL_OTHERS, default=None,
+                   metavar="IDS", help="replay each plan on other tasks of the same scene instead of its own: on the "
+                   "evaluated task ids IDS, or with no IDS on every other task of the suite")
+    p.add_argument("--own-out", type=Path, default=DEFAULT_OUT,
+                   help=f"with --cross-task: the own-task results the report sets beside (default {DEFAULT_OUT})")
+    p.add_argument("--out", type=Path, default=None,
+                   help=f"output folder (default {DEFAULT_OUT}, with --cross-task {DEFAULT_CROSS_OUT})")
     p.set_defaults(func=run)
 
 
@@ -112,9 +139,19 @@ def command_line(args: argparse.Namespace) -> str:
     if args.object_shift_cm:
         words += ["--object-shift-cm", f"{args.object_shift_cm:g}", "--object-shift-pattern", args.object_shift_pattern,
                   "--object-shift-directions", str(args.object_shift_directions)]
-    if args.out != DEFAULT_OUT:
+    if args.cross_task is not None:
+        words.insert(2, "--cross-task")
+        if tuple(args.cross_task) != ALL_OTHERS:
+            words.insert(3, ",".join(map(str, args.cross_task)))
+        if args.own_out != DEFAULT_OUT:
+            words += ["--own-out", str(args.own_out)]
+    if args.out != default_out(args):
         words += ["--out", str(args.out)]
     return shlex.join(words)
+
+
+def default_out(args: argparse.Namespace) -> Path:
+    return DEFAULT_OUT if args.cross_task is None else DEFAULT_CROSS_OUT
 
 
 def run(args: argparse.Namespace) -> int:
@@ -133,6 +170,13 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(str(err).replace("--env.object_shift_", "--object-shift-").replace("_", "-")) from err
     settings = Settings(states=states, source_state=args.source_state, cap=args.cap, seed=args.seed,
                         half_turn=args.half_turn, shift=shift)
+    if args.out is None:
+        args.out = default_out(args)
+    if args.cross_task is not None:
+        if args.object_shift_cm:
+            raise SystemExit("--cross-task replays plans on other tasks' official states; --object-shift-cm is not "
+                             "supported with it")
+        return run_cross(args, settings)
     expected = {suite: num_tasks(suite) for suite in args.suites}
     jobs = []
     for suite in args.suites:
@@ -171,10 +215,49 @@ def run(args: argparse.Namespace) -> int:
 
 
 def command_for_report(args: argparse.Namespace) -> str:
-    """The command that reproduces the whole report: every suite, every task, under these settings."""
+    """The command that reproduces the whole report: every suite, every task, under these settings (with
+    --cross-task: the suites and tasks asked for)."""
+    if args.cross_task is not None:
+        return command_line(args)
     full = argparse.Namespace(**{**vars(args), "suites": list(SUITES), "tasks": None})
     return command_line(full)
 
 
 def expected_all() -> dict[str, int]:
     return {suite: num_tasks(suite) for suite in SUITES}
+
+
+def run_cross(args: argparse.Namespace, settings: Settings) -> int:
+    """`--cross-task`: the plans of `--tasks` replayed on the evaluated tasks (see the module docstring)."""
+    work = {}
+    for suite in args.suites:
+        n = num_tasks(suite)
+        plan_tasks = args.tasks if args.tasks is not None else list(range(n))
+        evaluated = list(args.cross_task) or list(range(n))
+        bad = [t for t in {*plan_tasks, *evaluated} if not 0 <= t < n]
+        if bad:
+            raise SystemExit(f"--tasks / --cross-task {sorted(bad)}: {suite} has tasks 0-{n - 1}")
+        try:
+            work[suite] = pairs_to_run(args.out, suite, plan_tasks, evaluated, settings,
+                                       strict=bool(args.cross_task))
+        except ValueError as err:
+            raise SystemExit(f"--cross-task: {err}") from err
+    pending = sum(len(pairs) for pairs in work.values())
+    print(f"{pending} (plan task, evaluated task) pair(s) to run under {args.out}")
+    t0 = time.time()
+    with tqdm(total=pending * len(settings.states), desc="cross-task blind replay", unit="episode") as bar:
+        for suite, pairs in work.items():
+            plans = {a: plan_for(args.out, suite, a, settings) for a in sorted({p.plan_task for p in pairs})}
+            for b in sorted({p.evaluated_task for p in pairs}):
+                mine = {p.plan_task: plans[p.plan_task] for p in pairs if p.evaluated_task == b}
+                bar.set_postfix_str(f"{suite} evaluated task {b}")
+                result = run_evaluated_task(args.out, suite, b, mine, settings, progress=lambda: bar.update(1))
+                tqdm.write(f"{suite} evaluated task {b}: " + ", ".join(
+                    f"plan {a} {result['plans'][str(a)]['successes']}/{result['plans'][str(a)]['episodes']}"
+                    for a in mine))
+    report = write_cross_report(args.out, command_for_report(args), args.own_out)
+    if not report:
+        print(f"no results under {args.out}", file=sys.stderr)
+        return 1
+    print(f"wrote {args.out}/report.json, report.md, cross_task.png ({time.time() - t0:.0f} s)")
+    return 0
