@@ -1,4 +1,4 @@
-"""Where PredVLA's exact open loop leaves the demonstrations (`predvla divergence`): the measurement.
+"""Where PredVLA's exact open loop leaves the demonstrations (`python -m research.divergence`): the measurement.
 
 In the simulator: each chosen demonstration's own first MuJoCo state (and its fixture poses, from the scene XML it
 saved) is set, and three action sequences are run from it, physics only:
