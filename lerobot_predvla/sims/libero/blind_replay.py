@@ -237,8 +237,13 @@ def _states_text(states: list[int]) -> str:
     return ", ".join(map(str, states))
 
 
+def markdown_head(title: str, text: str, command: str) -> list[str]:
+    """The opening lines of a blind-replay report: its title, what it measures, and the command that made it."""
+    return [f"# {title}", "", text, "", "Reproduce:", "", "```bash", command, "```", ""]
+
+
 def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
-    lines = ["# One demonstration replayed blind", "",
+    lines = markdown_head("One demonstration replayed blind",
              "The scripted expert's plan (its actions) from one official init state of each task, replayed action by "
              "action with no observation on other official init states: `set_init_state`, the settle steps, the "
              "plan, then idle steps (arm still, gripper open) up to the step cap; success is LIBERO's "
@@ -246,8 +251,7 @@ def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
              "init state 0, and from the official init state whose object placements are nearest their mean over "
              "the task's 50 official init states (that plan is not replayed on its own source state: one episode "
              "fewer where its source is a replay state). *Own start* is each plan replayed on its source state "
-             "(must succeed wherever the expert did).", "",
-             "Reproduce:", "", "```bash", command, "```", ""]
+             "(must succeed wherever the expert did).", command)
     for suite, tasks in report.items():
         first = next(iter(tasks.values()))
         s0, n0 = totals(tasks)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from lerobot_predvla.columns import SUITES
-from lerobot_predvla.sims.libero.blind_replay import load_task, task_path
+from lerobot_predvla.sims.libero.blind_replay import load_task, markdown_head, task_path
 from lerobot_predvla.sims.libero.blind_replay_cross import TASKS_DIR
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 from lerobot_predvla.utils.statistics import episode_totals, percent
@@ -102,15 +102,14 @@ def _states_text(states: list[int]) -> str:
 
 
 def markdown(report: dict, command: str) -> str:
-    lines = ["# What ignoring the instruction gets: blind plans across tasks of one scene", "",
+    lines = markdown_head("What ignoring the instruction gets: blind plans across tasks of one scene",
              "Each *plan task*'s scripted-expert plan (its actions from an official init state, `--source-state`, "
              "0 by default) replayed action by action, with no observation, on the official init states of every "
              "other task of the same scene (the *evaluated task*), success judged by the evaluated task's goal. "
              "*Own plan*: the evaluated task's own state-0 plan on the same states, from the own-task blind replay"
              " (the same episodes). The other plans' rate is what another task's motion, done well and blind, gets"
              " by the evaluated task's goal: what a policy that follows a wrong instruction can expect by chance, "
-             "while a policy that ignores the instruction scores the same whichever it is given.", "",
-             "Reproduce:", "", "```bash", command, "```", ""]
+             "while a policy that ignores the instruction scores the same whichever it is given.", command)
     for suite, r in report.items():
         tasks = r["tasks"]
         lines += [f"## {suite}", "",
