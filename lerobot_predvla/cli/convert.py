@@ -6,14 +6,15 @@ import sys
 from pathlib import Path
 
 import datasets
-import torch
 
 from lerobot_predvla.cli.fit_frontend import (
     CONFIG_DEFAULTS,
     INPUT_ERRORS,
     add_dataset_source_arguments,
+    add_threads_argument,
     dataset_source_given,
     parse_cameras,
+    use_threads,
 )
 from lerobot_predvla.data.conversion import IMAGE_STORAGES, convert_suite
 from lerobot_predvla.data.dataset_conversion import convert_dataset
@@ -44,11 +45,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--language-dim", type=int, default=CONFIG_DEFAULTS["language_dim"])
     parser.add_argument("--vision-dim-per-camera", type=int, default=CONFIG_DEFAULTS["vision_dim_per_camera"])
     parser.add_argument("--batch-size", type=int, default=64, help="Images per ResNet18 forward pass.")
-    parser.add_argument(
-        "--threads", type=int, default=None,
-        help="Torch threads of the image encoder (default: torch's setting, e.g. OMP_NUM_THREADS); the features "
-        "are the same for any count.",
-    )
+    add_threads_argument(parser)
     parser.add_argument(
         "--oracle", action="store_true",
         help="hdf5 only, a diagnostic: replace the visual features by the simulator's object poses relative to the "
@@ -59,11 +56,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.threads is not None:
-        if args.threads < 1:
-            print(f"predvla: error: --threads must be >= 1, got {args.threads}", file=sys.stderr)
-            return 2
-        torch.set_num_threads(args.threads)  # the language encoder keeps one (frontend/language.py)
+    if not use_threads(args):
+        return 2
     datasets.disable_progress_bars()  # Our own bar counts frames; the per-episode Map bars are noise.
     common = {
         "frontend_dir": args.frontend, "out": args.out, "repo_id": args.repo_id, "language_dim": args.language_dim,

@@ -47,11 +47,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--vision-dim-per-camera", type=int, default=CONFIG_DEFAULTS["vision_dim_per_camera"])
     parser.add_argument("--frame-stride", type=int, default=1, help="Fit the visual PCA on every n-th frame.")
     parser.add_argument("--batch-size", type=int, default=64, help="Images per ResNet18 forward pass.")
-    parser.add_argument(
-        "--threads", type=int, default=None,
-        help="Torch threads of the image encoder (default: torch's setting, e.g. OMP_NUM_THREADS); the features "
-        "are the same for any count.",
-    )
+    add_threads_argument(parser)
     parser.add_argument(
         "--language-from", choices=LANGUAGE_SOURCES, default="demos",
         help="Instructions the language PCA is fitted on: 'demos' (default; one per pooled demonstration) or "
@@ -93,6 +89,26 @@ def add_dataset_source_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_threads_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--threads", type=int, default=None,
+        help="Torch threads of the image encoder (default: torch's setting, e.g. OMP_NUM_THREADS); the features "
+        "are the same for any count.",
+    )
+
+
+def use_threads(args: argparse.Namespace) -> bool:
+    """Apply `--threads` (the language encoder keeps one thread: frontend/language.py); False, with the error
+    printed, when it is not a positive count."""
+    if args.threads is None:
+        return True
+    if args.threads < 1:
+        print(f"predvla: error: --threads must be >= 1, got {args.threads}", file=sys.stderr)
+        return False
+    torch.set_num_threads(args.threads)
+    return True
+
+
 def dataset_source_given(args: argparse.Namespace) -> bool:
     """Whether the input is a LeRobot dataset; mixing it with LIBERO hdf5 input is an error."""
     given = args.dataset_root is not None or args.dataset_repo_id is not None
@@ -106,11 +122,8 @@ def parse_cameras(spec: str | None) -> list[str] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.threads is not None:
-        if args.threads < 1:
-            print(f"predvla: error: --threads must be >= 1, got {args.threads}", file=sys.stderr)
-            return 2
-        torch.set_num_threads(args.threads)  # the language encoder keeps one (frontend/language.py)
+    if not use_threads(args):
+        return 2
     try:
         if dataset_source_given(args):
             if args.language_from != "demos":
