@@ -248,6 +248,7 @@ class Kernels(NamedTuple):
 
 PYTHON_KERNELS = Kernels(python_forward, python_backward)
 WEIGHTS_AT = 14  # index of the first FusedWeights field among the flat inputs (`unpack_inputs`)
+Y1_AT = 6  # index of the heads' hidden layer y1 among the outputs (`pack_outputs`)
 
 
 class Recurrence(torch.autograd.Function):
@@ -262,10 +263,16 @@ class Recurrence(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, *grads: Tensor | None):
-        saved = ctx.saved_tensors
-        buffers, w = saved[: ctx.buffers], FusedWeights(*saved[ctx.buffers :])
-        needs_w = ctx.needs_input_grad[2 + WEIGHTS_AT :]
+        buffers, w, needs_w = saved_for_backward(ctx)
         return (None, None, *ctx.kernels.backward(ctx.meta, buffers, w, grads, needs_w))
+
+
+def saved_for_backward(ctx) -> tuple[tuple[Tensor, ...], FusedWeights, tuple[bool, ...]]:
+    """What `Recurrence.forward` saved: the kernels' buffers, the weights, and which weights need a gradient."""
+    saved = ctx.saved_tensors
+    weights_at = 2 + WEIGHTS_AT  # apply's arguments: kernels, meta, then the flat inputs
+    needs_w = ctx.needs_input_grad[weights_at : weights_at + len(FusedWeights._fields)]
+    return saved[: ctx.buffers], FusedWeights(*saved[ctx.buffers :]), needs_w
 
 
 class SharedActingChain(torch.autograd.Function):
@@ -281,26 +288,22 @@ class SharedActingChain(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, kernels: Kernels, meta: Meta, *args: Tensor):
-        inputs = args[:-4]  # the last four are p_act: the same values as p, only a gradient goes there
-        outs, buffers = kernels.forward(meta, *inputs)
-        ctx.kernels, ctx.meta, ctx.buffers = kernels, meta, len(buffers)
-        ctx.save_for_backward(*buffers, *inputs[WEIGHTS_AT:])
-        return (*outs, outs[6].clone())  # outs[6]: the heads' hidden layer y1 (`pack_outputs`)
+        # The last four arguments are p_act: the same values as p, only a gradient goes there.
+        outs = Recurrence.forward(ctx, kernels, meta, *args[:-4])
+        return (*outs, outs[Y1_AT].clone())
 
     @staticmethod
     def backward(ctx, *grads: Tensor | None):
-        saved, grads, g_act = ctx.saved_tensors, grads[:-1], grads[-1]
-        buffers, w = saved[: ctx.buffers], FusedWeights(*saved[ctx.buffers :])
-        needs_w = ctx.needs_input_grad[2 + WEIGHTS_AT : 2 + WEIGHTS_AT + len(FusedWeights._fields)]
+        (buffers, w, needs_w), grads, g_act = saved_for_backward(ctx), grads[:-1], grads[-1]
         if g_act is None:  # no action term: the posterior chain alone
             return (None, None, *ctx.kernels.backward(ctx.meta, buffers, w, grads, needs_w), None, None, None, None)
         # The backward is linear in the outputs' gradients: one pass with both chains' together gives every
         # gradient but the split of the priors' between p and p_act; a second pass with the action chain's alone
         # (no weight gradient) gives p_act's, and p's is the rest.
-        y1_at = 6  # position of the heads' hidden layer among the outputs (`pack_outputs`)
-        both = tuple(g_act if i == y1_at and g is None else g + g_act if i == y1_at else g for i, g in enumerate(grads))
-        out = ctx.kernels.backward(ctx.meta, buffers, w, both, needs_w)
-        action_only = tuple(g_act if i == y1_at else None for i in range(len(grads)))
+        both = list(grads)
+        both[Y1_AT] = g_act if grads[Y1_AT] is None else grads[Y1_AT] + g_act
+        out = ctx.kernels.backward(ctx.meta, buffers, w, tuple(both), needs_w)
+        action_only = tuple(g_act if i == Y1_AT else None for i in range(len(grads)))
         g_p_act = ctx.kernels.backward(ctx.meta, buffers, w, action_only, (False,) * len(needs_w))[0:4]
         g_p = [total - act for total, act in zip(out[0:4], g_p_act, strict=True)]
         return (None, None, *g_p, *out[4:], *g_p_act)
