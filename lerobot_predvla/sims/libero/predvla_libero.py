@@ -310,23 +310,25 @@ class SparseRenderLiberoEnv(LiberoEnv):
             self.init_state_id = episode
             self._shift_start(episode)
             observation, info = super().reset(seed=seed, **kwargs)
-        if self.shifts is not None:
-            record = {"episode_ix": episode, "task": self.task, "task_id": self.task_id,
-                      "init_state": episode % len(self._official_states), **self.shifts.settle(self._env)}
+        record = self._shift_record(episode)
+        if record is not None:
             info = {**info, "shift_settled": record["settled"]}
             if self._counted:
                 self.shift_records.append(record)
                 if not record["settled"]:
-                    logging.warning("predvla_libero: a shifted body did not settle where it was put: %s", record)
-        if self.placements is not None and self._counted:
-            record = {"episode_ix": episode, "task": self.task, "task_id": self.task_id,
-                      **self.placements.settle(self._env)}
-            info = {**info, "shift_settled": record["settled"]}
-            self.shift_records.append(record)
-            if not record["settled"]:
-                logging.warning("predvla_libero: shifted placements did not settle where they were put: %s", record)
+                    logging.warning("predvla_libero: shifted objects did not settle where they were put: %s", record)
         self._last_observation = observation
         return observation, info
+
+    def _shift_record(self, episode: int) -> dict | None:
+        """After the reset's settle steps: this episode's shifted objects (`--env.object_shift_cm` or, on lerobot-eval's
+        rollouts, `--env.placement_spread_cm`) and whether they settled; None when nothing was shifted."""
+        where = {"episode_ix": episode, "task": self.task, "task_id": self.task_id}
+        if self.shifts is not None:
+            return {**where, "init_state": episode % len(self._official_states), **self.shifts.settle(self._env)}
+        if self.placements is not None and self._counted:
+            return {**where, **self.placements.settle(self._env)}
+        return None
 
     def _shift_start(self, episode: int) -> None:
         """Put this episode's shifted state where `LiberoEnv.reset` takes its official init state from."""
