@@ -108,9 +108,9 @@ class PredVLALiberoEnv(LiberoEnv):
             `--seed=s` seeds episode i of every task's reset with s + i (batch b of `--eval.batch_size` n resets
             its sub-environments with s + b * n ... s + b * n + n - 1, and each task starts again from s), so episode
             i of an evaluation with `--seed=3000` starts as the demonstration of episode seed 3000 + i would. Needs
-            `--env.init_states=false` and lerobot-eval's `--seed`; cannot be combined with `--env.object_shift_cm`
-            or `--env.target_shift_cm`. Every episode's offsets and whether the objects settled (within 1 cm) go
-            to eval_info.json's `predvla_shifts` section.
+            `--env.init_states=false` and a seed (lerobot-eval's default is 1000); cannot be combined with
+            `--env.object_shift_cm` or `--env.target_shift_cm`. Every episode's offsets and whether the objects
+            settled (within 1 cm) go to eval_info.json's `predvla_shifts` section.
 
     `--env.task` also takes LIBERO-PRO and LIBERO-plus variants, e.g. `libero_object_pro_temp_x0.1` or
     `libero_object_plus_language_3` (`variants`).

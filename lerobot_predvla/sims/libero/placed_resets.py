@@ -42,7 +42,7 @@ def check_placement(spread_cm: float, init_states: bool, object_shift: bool) -> 
                          "from an official init state.")
     if init_states:
         raise ValueError(f"{FLAG} shifts the objects after LIBERO's randomised resets: it needs "
-                         "--env.init_states=false (and lerobot-eval's --seed, which seeds each episode's reset).")
+                         "--env.init_states=false.")
 
 
 class PlacedResets:
