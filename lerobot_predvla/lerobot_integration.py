@@ -94,8 +94,8 @@ def make_env_pre_post_processors(env_cfg: EnvConfig, policy_cfg) -> tuple:
 def eval_policy_all(envs: dict, policy, env_preprocessor, *args, **kwargs) -> dict:
     """LeRobot's `eval_policy_all`, plus the `predvla_faults` section (written into eval_info.json): faulted episodes
     with their reasons, non-finite actions, observations the policy masked, actions it replaced, injected faults; and
-    with shifted objects (`--env.object_shift_cm`), the `predvla_shifts` section: every episode's shift and whether
-    the shifted bodies settled where they were put.
+    with shifted objects (`--env.object_shift_cm`, `--env.placement_spread_cm`), the `predvla_shifts` section: every
+    episode's shift and whether the shifted bodies settled where they were put.
 
     Replaces: `lerobot.scripts.lerobot_eval.eval_policy_all` (which `lerobot-eval` calls from its own module, and
     `lerobot-train`'s periodic evaluation through the name it imported, left unchanged).

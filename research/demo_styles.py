@@ -17,7 +17,7 @@ import numpy as np
 from tqdm import tqdm
 
 from lerobot_predvla.cli.blind_replay import _ints
-from lerobot_predvla.sims.libero.blind_replay import Settings, replay, task_path
+from lerobot_predvla.sims.libero.blind_replay import Settings, plan_replays, task_path
 from lerobot_predvla.sims.libero.env import OFFICIAL_INIT_NOISE, make_env, official_init_states, task_spec
 from lerobot_predvla.sims.libero.expert.teleop import TELEOP, TeleopParams
 from lerobot_predvla.sims.libero.geometry import GRIP_SITE
@@ -118,22 +118,18 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def blind_teleop_plan(task_id: int, states: tuple[int, ...], suite: str = "libero_object") -> dict:
-    """The teleop plan from official init state 0 (`blind_replay.record_plan`'s settings, the teleoperator seeded by
-    the episode's seed, 0) replayed blind on its own state and on `states`."""
-    settings = Settings(states=states)
-    spec = task_spec(suite, task_id)
-    init = official_init_states(suite, task_id)
-    env = make_env(spec)
+    """The teleop plan from official init state 0 (the teleoperator model at diversity 1, seeded by the episode's seed,
+    0) replayed blind on its own state and on `states`: `predvla blind-replay --style teleop`'s state-0 plan
+    (`blind_replay.plan_replays`)."""
+    settings = Settings(states=states, style="teleop")
+    env = make_env(task_spec(suite, task_id))
     try:
-        np.random.seed(settings.seed)
-        episode = run_episode(env, settings.seed, settings.cap, settings.half_turn, init_state=init[0], teleop=TELEOP)
-        own = replay(env, init[0], episode.actions, settings.seed, settings)
-        outcomes = {str(s): replay(env, init[s], episode.actions, settings.seed + s, settings) for s in states}
+        plan = plan_replays(env, official_init_states(suite, task_id), 0, settings)
     finally:
         env.close()
-    return {"task_id": task_id, "settings": settings.as_dict(), "source_success": bool(episode.success),
-            "plan_steps": len(episode.actions), "own_replay_step": own, "success_step": outcomes,
-            "successes": sum(v is not None for v in outcomes.values()), "episodes": len(outcomes)}
+    return {"task_id": task_id, "settings": settings.as_dict(), "source_success": plan["source_success"],
+            "plan_steps": plan["source_steps"], "own_replay_step": plan["source_replay_step"],
+            "success_step": plan["success_step"], "successes": plan["successes"], "episodes": plan["episodes"]}
 
 
 def scripted_blind_plan(committed: Path, states: tuple[int, ...]) -> dict:

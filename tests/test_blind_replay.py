@@ -164,3 +164,45 @@ def test_unshifted_settings_keep_the_form_the_committed_results_were_recorded_wi
     committed = json.loads((REPO / "results" / "blind_replay" / "tasks" / SUITE / "task0.json").read_text())
     assert committed["settings"] == blind_replay.Settings().as_dict()
     assert "shift" in blind_replay.Settings(shift=blind_replay.ShiftSpec(object_cm=2)).as_dict()
+
+
+@pytest.mark.simulator
+def test_teleop_style_replays_the_teleoperator_models_demonstration_and_names_it(tiny_run, tmp_path):
+    """`--style teleop`: the plan from state 0 is the teleoperator model's demonstration, not the script's (it starts
+    idle and takes another path), the one `research.demo_styles` measured (its committed blind replay: plan length and
+    success steps on states 1 and 2); the task's settings, report.json and report.md name the style."""
+    scripted = json.loads(blind_replay.task_path(tiny_run[0], SUITE, TASK_ID).read_text())["plans"]["state0"]
+    out = tmp_path / "teleop"
+    args = ["blind-replay", "--suites", SUITE, "--tasks", str(TASK_ID), "--states", ",".join(map(str, STATES)),
+            "--cap", str(CAP), "--style", "teleop", "--out", str(out)]
+    assert predvla_main(args) == 0
+    task = json.loads(blind_replay.task_path(out, SUITE, TASK_ID).read_text())
+    assert task["settings"]["style"] == "teleop" and task["settings"]["diversity"] == 1.0
+    plan = task["plans"]["state0"]
+    assert plan["plan"] != scripted["plan"] and plan["source_success"]
+    assert not any(plan["plan"][0][:6]) and any(scripted["plan"][0][:6])  # the operator's idle start; the script moves
+    measured = json.loads((REPO / "results/demonstrations/report.json").read_text())["blind"]["teleop"]
+    assert plan["source_steps"] == measured["plan_steps"]
+    assert plan["success_step"] == {str(s): measured["success_step"][str(s)] for s in STATES}
+    entry = json.loads((out / blind_replay.REPORT_JSON).read_text())[SUITE][str(TASK_ID)]
+    assert (entry["style"], entry["diversity"]) == ("teleop", 1.0)
+    assert "teleoperator model" in (out / blind_replay.REPORT_MD).read_text()
+    assert "--style teleop --diversity 1" in (out / blind_replay.REPORT_MD).read_text()
+    scripted_entry = json.loads((tiny_run[0] / blind_replay.REPORT_JSON).read_text())[SUITE][str(TASK_ID)]
+    assert scripted_entry["style"] == "scripted" and "diversity" not in scripted_entry
+
+
+def test_style_flags_are_checked_and_one_report_holds_one_style(tmp_path):
+    with pytest.raises(SystemExit, match="--diversity 0.5 needs --style teleop"):
+        predvla_main(["blind-replay", "--diversity", "0.5", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit, match="--diversity must be >= 0"):
+        predvla_main(["blind-replay", "--style", "teleop", "--diversity", "-1", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit, match="--style teleop are not supported"):
+        predvla_main(["blind-replay", "--cross-task", "--style", "teleop", "--out", str(tmp_path)])
+    scripted = blind_replay.task_path(tmp_path, SUITE, 3)
+    atomic_write_json(scripted, {"settings": blind_replay.Settings().as_dict()})
+    with pytest.raises(SystemExit, match="another style"):
+        predvla_main(["blind-replay", "--suites", SUITE, "--tasks", "0", "--style", "teleop", "--out", str(tmp_path)])
+    teleop = blind_replay.Settings(style="teleop", diversity=0.5).as_dict()
+    assert (teleop["style"], teleop["diversity"]) == ("teleop", 0.5)
+    assert blind_replay.Settings(diversity=0.5).as_dict() == blind_replay.Settings().as_dict()

@@ -285,15 +285,20 @@ def test_the_full_scale_reading_run_is_table_2_with_only_the_reading_changed(tmp
             ours_of(x) for x in (twin.checkpoint_from, twin.compare_to, twin.pool_with)), name
 
 
+PLACED = "_placed_resets"  # D3's evaluations from randomised resets with placements shifted as its demonstrations'
+
+
 def test_the_demonstration_screens_differ_only_in_their_dataset(tmp_path):
-    """The three screens of docs/research/demonstrations.md: the same policies, modes and evaluation sets; the teleop
-    ones reach `predvla demos` with their style, diversity and placement spread, the scripted one with Table 2's
-    command (no style flags)."""
+    """The three screens of docs/research/demonstrations.md: the same policies, modes and evaluation sets (D3 also
+    its `*_placed_resets`); the teleop ones reach `predvla demos` with their style, diversity and placement spread,
+    the scripted one with Table 2's command (no style flags)."""
     sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
     loaded = {name: Sweep.load(sweeps / f"libero_object_demos_{name}.yaml")
               for name in ("scripted", "teleop", "teleop_placed")}
-    assert len({tuple(sorted(s.configs)) for s in loaded.values()}) == 1
-    assert len({repr(s.configs) for s in loaded.values()}) == 1
+    shared = [{n: c for n, c in s.configs.items() if PLACED not in n} for s in loaded.values()]
+    assert len({tuple(sorted(configs)) for configs in shared}) == 1
+    assert len({repr(configs) for configs in shared}) == 1
+    assert not any(PLACED in n for s in (loaded["scripted"], loaded["teleop"]) for n in s.configs)
     commands = {}
     for name, sweep in loaded.items():
         spec = sweep.settings.data["libero_object"]
@@ -310,3 +315,27 @@ def test_the_demonstration_screens_differ_only_in_their_dataset(tmp_path):
     scripted = loaded["scripted"].settings.data["libero_object"]
     assert {k: v for k, v in vars(scripted).items() if k not in ("hdf5", "frontend")} == \
         {k: v for k, v in vars(table2).items() if k not in ("hdf5", "frontend")}
+
+
+def test_d3_is_also_evaluated_from_resets_placed_like_its_demonstrations(tmp_path):
+    """Every `*_resets` evaluation of D3 has its `*_placed_resets` twin: the same checkpoint, mode, seed and pairing,
+    plus `--env.placement_spread_cm=3` (the demonstrations' 3 cm)."""
+    sweep = Sweep.load(Path(__file__).parents[1] / "configs" / "sweeps" / "libero_object_demos_teleop_placed.yaml")
+    assert sweep.settings.data["libero_object"].placement_spread == 3.0
+
+    def twin(name: str | None) -> str | None:
+        return None if name is None else name.replace("_resets", PLACED)
+
+    resets = [n for n in sweep.configs if n.endswith("_resets") and PLACED not in n]
+    assert sorted(twin(n) for n in resets) == sorted(n for n in sweep.configs if PLACED in n) and len(resets) == 8
+    for name in resets:
+        spec, placed = sweep.configs[name], sweep.configs[twin(name)]
+        assert placed.eval_args == [*spec.eval_args, "--env.placement_spread_cm=3"], name
+        assert placed.compare_to == twin(spec.compare_to) and placed.label.startswith(spec.label), name
+        assert {k: v for k, v in vars(placed).items() if k not in ("name", "label", "eval_args", "compare_to")} == \
+            {k: v for k, v in vars(spec).items() if k not in ("name", "label", "eval_args", "compare_to")}, name
+        assert not placed.init_states and placed.eval_seed == 3000
+    command = Runner(sweep, tmp_path).eval_command(Run("olt_open_loop_placed_resets", "libero_object", 0),
+                                                   tmp_path / "ckpt", tmp_path / "out", [])
+    assert arg(command, "env.init_states") == "false" and arg(command, "seed") == "3000"
+    assert arg(command, "env.placement_spread_cm") == "3" and arg(command, "env.render_interval") == "100000"

@@ -10,6 +10,13 @@ successes, episodes), OUT/report.md and OUT/blind_replay.png. Physics only, no r
   predvla blind-replay --suites libero_object
   predvla blind-replay   # all four suites, resuming
 
+`--style teleop --diversity D`: the plans are the teleoperator model's demonstrations from the source states (as
+`predvla demos --style teleop --diversity D` records them; the episode on state k is seeded by seed + k) instead of
+the scripted expert's. The settings of every per-task file and report.json's entries name the style (and diversity);
+default OUT: results/blind_replay_teleop.
+
+  predvla blind-replay --suites libero_object --tasks 0 --states 1-19 --style teleop
+
 `--cross-task`: what ignoring the instruction gets. The state-0 plan of each task in `--tasks` (the plan tasks) is
 replayed on the official init states `--states` of every other task of the same scene (or of the evaluated tasks
 listed after the flag), success judged by the evaluated task's goal. Only tasks that share one scene are paired
@@ -35,10 +42,13 @@ from lerobot_predvla.columns import SUITES
 from lerobot_predvla.sims.libero.blind_replay import (
     DEFAULT_OUT,
     DEFAULT_STATES,
+    DEFAULT_TELEOP_OUT,
+    TASKS_DIR,
     Settings,
     episodes_per_task,
     load_task,
     run_task,
+    style_of,
     task_path,
     write_report,
 )
@@ -51,6 +61,7 @@ from lerobot_predvla.sims.libero.blind_replay_cross import (
 from lerobot_predvla.sims.libero.cross_task_report import write_cross_report
 from lerobot_predvla.sims.libero.env import num_tasks
 from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
+from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE, STYLES
 from lerobot_predvla.sims.libero.object_shift import PATTERNS, ShiftSpec
 from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH
 from lerobot_predvla.utils.io import atomic_write_json
@@ -112,13 +123,20 @@ def add_parser(subparsers) -> None:
                         "--env.object_shift_cm does on official init state k (default 0: none)")
     p.add_argument("--object-shift-pattern", choices=PATTERNS, default="ring", help="as --env.object_shift_pattern")
     p.add_argument("--object-shift-directions", type=int, default=8, help="as --env.object_shift_directions")
+    p.add_argument("--style", choices=STYLES, default=DEFAULT_STYLE,
+                   help="who executes the plan recorded from the source state: the scripted expert (default) or the "
+                        "teleoperator model (as `predvla demos --style`)")
+    p.add_argument("--diversity", type=float, default=None,
+                   help="with --style teleop: the teleoperator model's diversity (default 1, the committed setting; "
+                        "0: the script's actions exactly)")
     p.add_argument("--cross-task", type=_ints("--cross-task"), nargs="?", const=ALL_OTHERS, default=None,
                    metavar="IDS", help="replay each plan on other tasks of the same scene instead of its own: on the "
                    "evaluated task ids IDS, or with no IDS on every other task of the suite")
     p.add_argument("--own-out", type=Path, default=DEFAULT_OUT,
                    help=f"with --cross-task: the own-task results the report sets beside (default {DEFAULT_OUT})")
     p.add_argument("--out", type=Path, default=None,
-                   help=f"output folder (default {DEFAULT_OUT}, with --cross-task {DEFAULT_CROSS_OUT})")
+                   help=f"output folder (default {DEFAULT_OUT}, with --style teleop {DEFAULT_TELEOP_OUT}, with "
+                        f"--cross-task {DEFAULT_CROSS_OUT})")
     p.set_defaults(func=run)
 
 
@@ -136,6 +154,8 @@ def command_line(args: argparse.Namespace) -> str:
         words += ["--cap", str(args.cap)]
     if args.seed != 0:
         words += ["--seed", str(args.seed)]
+    if args.style != DEFAULT_STYLE:
+        words += ["--style", args.style, "--diversity", f"{diversity(args):g}"]
     if args.object_shift_cm:
         words += ["--object-shift-cm", f"{args.object_shift_cm:g}", "--object-shift-pattern", args.object_shift_pattern,
                   "--object-shift-directions", str(args.object_shift_directions)]
@@ -151,7 +171,25 @@ def command_line(args: argparse.Namespace) -> str:
 
 
 def default_out(args: argparse.Namespace) -> Path:
-    return DEFAULT_OUT if args.cross_task is None else DEFAULT_CROSS_OUT
+    if args.cross_task is not None:
+        return DEFAULT_CROSS_OUT
+    return DEFAULT_TELEOP_OUT if args.style != DEFAULT_STYLE else DEFAULT_OUT
+
+
+def diversity(args: argparse.Namespace) -> float:
+    """--diversity, 1 (the committed setting) when not given."""
+    return 1.0 if args.diversity is None else args.diversity
+
+
+def other_style(out: Path, suites: list[str], settings: Settings) -> Path | None:
+    """A per-task file under `out` made with another style or diversity than `settings` (one report holds one)."""
+    mine = style_of(settings.as_dict())
+    for suite in suites:
+        for path in sorted((Path(out) / TASKS_DIR / suite).glob("task*.json")):
+            done = load_task(path)
+            if done is not None and style_of(done.get("settings", {})) != mine:
+                return path
+    return None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -168,15 +206,24 @@ def run(args: argparse.Namespace) -> int:
                           directions=args.object_shift_directions)
     except ValueError as err:
         raise SystemExit(str(err).replace("--env.object_shift_", "--object-shift-").replace("_", "-")) from err
-    settings = Settings(states=states, source_state=args.source_state, cap=args.cap, seed=args.seed,
-                        half_turn=args.half_turn, shift=shift)
+    if args.diversity is not None and args.style != "teleop":
+        raise SystemExit(f"--diversity {args.diversity} needs --style teleop (the script has no diversity)")
+    try:
+        settings = Settings(states=states, source_state=args.source_state, cap=args.cap, seed=args.seed,
+                            half_turn=args.half_turn, shift=shift, style=args.style, diversity=diversity(args))
+    except ValueError as err:
+        raise SystemExit(str(err)) from err
     if args.out is None:
         args.out = default_out(args)
     if args.cross_task is not None:
-        if args.object_shift_cm:
-            raise SystemExit("--cross-task replays plans on other tasks' official states; --object-shift-cm is not "
-                             "supported with it")
+        if args.object_shift_cm or args.style != DEFAULT_STYLE:
+            raise SystemExit("--cross-task replays scripted plans on other tasks' official states; --object-shift-cm "
+                             "and --style teleop are not supported with it")
         return run_cross(args, settings)
+    mixed = other_style(args.out, args.suites, settings)
+    if mixed is not None:
+        raise SystemExit(f"{mixed} holds plans of another style ({style_of(load_task(mixed)['settings'])}); one "
+                         "report holds one style: pass another --out")
     expected = {suite: num_tasks(suite) for suite in args.suites}
     jobs = []
     for suite in args.suites:

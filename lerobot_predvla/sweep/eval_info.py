@@ -26,7 +26,7 @@ def episode_successes(path: Path) -> dict[str, list[bool]]:
 
 def unsettled_episodes(path: Path) -> int:
     """Episodes whose shifted bodies did not settle where they were put (`predvla_shifts`, written by `predvla_libero`
-    with `--env.object_shift_cm`); 0 without shifts."""
+    with `--env.object_shift_cm` or `--env.placement_spread_cm`); 0 without shifts."""
     try:
         shifts = json.loads(Path(path).read_text()).get("predvla_shifts") or {}
         return len(shifts.get("unsettled_episodes", []))

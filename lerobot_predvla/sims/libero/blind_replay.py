@@ -14,6 +14,11 @@ Two plans per task, both chosen before any outcome is seen:
   states. It is replayed on the same replay states, less its own source state if that is one of them (then one
   episode fewer).
 
+With `Settings.style` "teleop" (`predvla blind-replay --style teleop --diversity D`) the plan is the teleoperator
+model's demonstration from the source state instead (`expert.teleop`, the model `predvla demos --style teleop` records
+with, seeded by the source episode's seed, `seed + source`): the same plan, executed with curved paths, varying speed,
+idle stretches, overshoots and regrasps.
+
 Each plan is also replayed on its own source state: it must reproduce the expert's success there (a check that the
 replay is exact). With `Settings.shift` (`predvla blind-replay --object-shift-cm`), the replays on the other states
 start with the object to pick shifted as `predvla_libero --env.object_shift_cm` shifts it in episode k on official
@@ -31,6 +36,7 @@ import numpy as np
 
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.sims.libero.env import make_env, official_init_states, task_spec
+from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE, STYLES, TELEOP, TeleopParams
 from lerobot_predvla.sims.libero.object_shift import ShiftedResets, ShiftSpec
 from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH, SUITE_LABELS
 from lerobot_predvla.sims.libero.rollout import IDLE, SETTLE_STEPS, run_episode
@@ -42,6 +48,7 @@ NEAREST_MEAN_KEY = "nearest_mean_plan"  # report.json: the second plan's numbers
 REPORT_JSON, REPORT_MD, FIGURE = "report.json", "report.md", "blind_replay.png"
 TASKS_DIR = "tasks"
 DEFAULT_OUT = Path("results/blind_replay")
+DEFAULT_TELEOP_OUT = Path("results/blind_replay_teleop")  # `--style teleop`: its own report beside the scripted one
 DEFAULT_STATES = tuple(range(1, 21))
 
 
@@ -56,11 +63,31 @@ class Settings:
     seed: int = 0
     half_turn: str = "nearest"
     shift: ShiftSpec = ShiftSpec()  # the object to pick moved on the replay states (`object_shift`)
+    style: str = DEFAULT_STYLE  # who executes the plan: the script, or the teleoperator model (`expert.teleop`)
+    diversity: float = 1.0  # the teleoperator model's diversity (`TeleopParams.at`); the script has none
+
+    def __post_init__(self) -> None:
+        if self.style not in STYLES:
+            raise ValueError(f"--style must be one of {STYLES}, got {self.style!r}")
+        if not self.diversity >= 0:
+            raise ValueError(f"--diversity must be >= 0, got {self.diversity}")
+
+    def teleop(self) -> TeleopParams | None:
+        """The teleoperator model at this diversity, or None for the scripted expert."""
+        return TELEOP.at(self.diversity) if self.style == "teleop" else None
 
     def as_dict(self) -> dict:
-        shift = {"shift": asdict(self.shift)} if self.shift.active else {}  # unshifted results keep their settings
+        # Unshifted, scripted results keep the settings they were recorded with.
+        shift = {"shift": asdict(self.shift)} if self.shift.active else {}
+        style = {"style": self.style, "diversity": self.diversity} if self.style != DEFAULT_STYLE else {}
         return {"states": list(self.states), "source_state": self.source_state, "cap": self.cap,
-                "settle_steps": self.settle_steps, "seed": self.seed, "half_turn": self.half_turn, **shift}
+                "settle_steps": self.settle_steps, "seed": self.seed, "half_turn": self.half_turn, **shift, **style}
+
+
+def style_of(settings: dict) -> dict:
+    """{"style": ..., and "diversity" for the teleoperator model} of a result's settings (`Settings.as_dict`)."""
+    style = settings.get("style", DEFAULT_STYLE)
+    return {"style": style, **({"diversity": settings["diversity"]} if style != DEFAULT_STYLE else {})}
 
 
 def task_path(out: Path, suite: str, task_id: int) -> Path:
@@ -95,10 +122,12 @@ def _reset(env, init_state: np.ndarray, seed: int) -> None:
 
 
 def record_plan(env, init_state: np.ndarray, seed: int, settings: Settings) -> dict:
-    """The scripted expert from `init_state` (`run_episode`), its actions kept as the plan."""
+    """The scripted expert (or with `settings.style` "teleop" the teleoperator model, seeded by `seed`) from
+    `init_state` (`run_episode`), its actions kept as the plan."""
     assert settings.settle_steps == SETTLE_STEPS, "run_episode settles for SETTLE_STEPS"
     np.random.seed(seed)
-    episode = run_episode(env, seed, settings.cap, settings.half_turn, init_state=init_state)
+    episode = run_episode(env, seed, settings.cap, settings.half_turn, init_state=init_state,
+                          teleop=settings.teleop())
     return {"actions": episode.actions, "success": bool(episode.success), "steps": len(episode.actions),
             "note": episode.note}
 
@@ -131,47 +160,56 @@ def _play(env, actions: np.ndarray, settings: Settings) -> int | None:
     return None
 
 
+def plan_replays(env, init_states: np.ndarray, source: int, settings: Settings, progress=None) -> dict:
+    """The plan recorded from official init state `source` (`record_plan`, episode seed `settings.seed + source`),
+    replayed on its own source state and on `settings.states` less `source`; `progress` is called after every
+    episode."""
+    tick = progress or (lambda: None)
+    plan = record_plan(env, init_states[source], settings.seed + source, settings)
+    tick()
+    own = replay(env, init_states[source], plan["actions"], settings.seed + source, settings)
+    tick()
+    states = [s for s in settings.states if s != source]
+    outcomes, settles = {}, {}
+    for state in states:
+        if settings.shift.active:  # episode index = the state's, as lerobot-eval's episode k on state k
+            outcomes[str(state)], settles[str(state)] = replay_shifted(
+                env, init_states[state], plan["actions"], settings.seed + state, settings,
+                ShiftedResets(settings.shift), state)
+        else:
+            outcomes[str(state)] = replay(env, init_states[state], plan["actions"], settings.seed + state, settings)
+        tick()
+    return {
+        "source_state": source, "source_success": plan["success"], "source_steps": plan["steps"],
+        "source_note": plan["note"], "source_replay_step": own,
+        "excluded_states": [s for s in settings.states if s == source],
+        "states": states, "success_step": outcomes,
+        "successes": sum(v is not None for v in outcomes.values()), "episodes": len(outcomes),
+        "plan": plan["actions"].round(6).tolist(),
+        **({"shifts": settles} if settles else {}),
+    }
+
+
+def check_states(suite: str, task_id: int, init_states: np.ndarray, settings: Settings) -> None:
+    """ValueError unless the source state and every replay state are official init states of the task."""
+    wanted = {settings.source_state, *settings.states}
+    if max(wanted) >= len(init_states) or min(wanted) < 0:
+        raise ValueError(f"{suite} task {task_id} has {len(init_states)} official init states (0-"
+                         f"{len(init_states) - 1}); --states / --source-state ask for {sorted(wanted)}")
+
+
 def run_task(suite: str, task_id: int, settings: Settings, progress=None) -> dict:
     """Both plans of one task, each replayed on `settings.states` (and on its own source state); `progress` is
     called after every episode."""
     t0 = time.time()
     spec = task_spec(suite, task_id)
     init_states = official_init_states(suite, task_id)
-    wanted = {settings.source_state, *settings.states}
-    if max(wanted) >= len(init_states) or min(wanted) < 0:
-        raise ValueError(f"{suite} task {task_id} has {len(init_states)} official init states (0-"
-                         f"{len(init_states) - 1}); --states / --source-state ask for {sorted(wanted)}")
+    check_states(suite, task_id, init_states, settings)
     env = make_env(spec)
     try:
         nearest = nearest_mean_state(env, init_states)
         sources = {"state0": settings.source_state, "nearest_mean": nearest["state"]}
-        plans = {}
-        for name, source in sources.items():
-            plan = record_plan(env, init_states[source], settings.seed + source, settings)
-            tick = progress or (lambda: None)
-            tick()
-            own = replay(env, init_states[source], plan["actions"], settings.seed + source, settings)
-            tick()
-            states = [s for s in settings.states if s != source]
-            outcomes, settles = {}, {}
-            for state in states:
-                if settings.shift.active:  # episode index = the state's, as lerobot-eval's episode k on state k
-                    outcomes[str(state)], settles[str(state)] = replay_shifted(
-                        env, init_states[state], plan["actions"], settings.seed + state, settings,
-                        ShiftedResets(settings.shift), state)
-                else:
-                    outcomes[str(state)] = replay(env, init_states[state], plan["actions"], settings.seed + state,
-                                                  settings)
-                tick()
-            plans[name] = {
-                "source_state": source, "source_success": plan["success"], "source_steps": plan["steps"],
-                "source_note": plan["note"], "source_replay_step": own,
-                "excluded_states": [s for s in settings.states if s == source],
-                "states": states, "success_step": outcomes,
-                "successes": sum(v is not None for v in outcomes.values()), "episodes": len(outcomes),
-                "plan": plan["actions"].round(6).tolist(),
-                **({"shifts": settles} if settles else {}),
-            }
+        plans = {name: plan_replays(env, init_states, source, settings, progress) for name, source in sources.items()}
     finally:
         env.close()
     return {"suite": suite, "task_id": task_id, "task_name": spec.name, "language": spec.language,
@@ -201,7 +239,8 @@ def _entry(task: dict) -> dict:
                 is not None, "plan_steps": plan["source_steps"], "excluded_states": plan["excluded_states"]}
 
     return {**numbers(first), "task_name": task["task_name"], "states": task["settings"]["states"],
-            "cap": task["settings"]["cap"], "seconds": task["seconds"], NEAREST_MEAN_KEY: numbers(second)}
+            "cap": task["settings"]["cap"], "seconds": task["seconds"], **style_of(task["settings"]),
+            NEAREST_MEAN_KEY: numbers(second)}
 
 
 def collect(out: Path) -> dict[str, dict[str, dict]]:
@@ -242,9 +281,17 @@ def markdown_head(title: str, text: str, command: str) -> list[str]:
     return [f"# {title}", "", text, "", "Reproduce:", "", "```bash", command, "```", ""]
 
 
+def plan_words(entry: dict) -> str:
+    """Who made the plans of a report entry (`_entry`), for the report's text."""
+    if entry.get("style", DEFAULT_STYLE) == DEFAULT_STYLE:
+        return "The scripted expert's plan"
+    return f"The teleoperator model's demonstration (`--style {entry['style']}`, diversity {entry['diversity']:g})"
+
+
 def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
+    who = plan_words(next(iter(next(iter(report.values())).values())))
     lines = markdown_head("One demonstration replayed blind",
-             "The scripted expert's plan (its actions) from one official init state of each task, replayed action by "
+             f"{who} (its actions) from one official init state of each task, replayed action by "
              "action with no observation on other official init states: `set_init_state`, the settle steps, the "
              "plan, then idle steps (arm still, gripper open) up to the step cap; success is LIBERO's "
              "`check_success()` after any step. Two plans per task, both chosen before any outcome: from official "

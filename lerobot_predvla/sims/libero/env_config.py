@@ -40,6 +40,7 @@ from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM
 from lerobot_predvla.sims.libero.fault_injection import FaultInjectionStep
 from lerobot_predvla.sims.libero.object_shift import ShiftSpec
+from lerobot_predvla.sims.libero.placed_resets import check_placement
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
 
 OBS_ROBOT_STATE = "observation.robot_state"
@@ -100,6 +101,16 @@ class PredVLALiberoEnv(LiberoEnv):
         object_shift_directions: Directions of the ring (8).
         shift_tolerance_cm: How far a shifted body may move while it settles before its episode is reported as
             unsettled (1 cm).
+        placement_spread_cm: With `--env.init_states=false`: after each episode's randomised reset, before the
+            settle steps, shift every movable object by an x, y offset drawn per axis from N(0, this many cm)
+            truncated at twice that, exactly as `predvla demos --placement-spread-cm` does for a demonstration
+            whose episode seed is the reset seed (`placed_resets`); 0 (default) shifts nothing. lerobot-eval's
+            `--seed=s` seeds episode i of every task's reset with s + i (batch b of `--eval.batch_size` n resets
+            its sub-environments with s + b * n ... s + b * n + n - 1, and each task starts again from s), so episode
+            i of an evaluation with `--seed=3000` starts as the demonstration of episode seed 3000 + i would. Needs
+            `--env.init_states=false` and a seed (lerobot-eval's default is 1000); cannot be combined with
+            `--env.object_shift_cm` or `--env.target_shift_cm`. Every episode's offsets and whether the objects
+            settled (within 1 cm) go to eval_info.json's `predvla_shifts` section.
 
     `--env.task` also takes LIBERO-PRO and LIBERO-plus variants, e.g. `libero_object_pro_temp_x0.1` or
     `libero_object_plus_language_3` (`variants`).
@@ -117,6 +128,7 @@ class PredVLALiberoEnv(LiberoEnv):
     object_shift_pattern: str = "ring"
     object_shift_directions: int = 8
     shift_tolerance_cm: float = 1.0
+    placement_spread_cm: float = 0.0
 
     def __post_init__(self):
         super().__post_init__()
@@ -125,6 +137,7 @@ class PredVLALiberoEnv(LiberoEnv):
         if self.obs_type != "pixels_agent_pos":
             raise ValueError(f"--env.obs_type must be 'pixels_agent_pos' for predvla_libero, got {self.obs_type!r}.")
         self.fault_injection()  # validates fault_rate and fault_mode
+        check_placement(self.placement_spread_cm, self.init_states, self.shift().active)
         if self.shift().active and not self.init_states:
             raise ValueError("--env.object_shift_cm / --env.target_shift_cm move objects from the official init "
                              "states: they need --env.init_states=true.")
@@ -143,7 +156,7 @@ class PredVLALiberoEnv(LiberoEnv):
     @property
     def gym_kwargs(self) -> dict:
         return {**super().gym_kwargs, "render_interval": self.render_interval, "oracle": self.oracle,
-                "shift": self.shift()}
+                "shift": self.shift(), "placement_spread_cm": self.placement_spread_cm}
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False):
         # The simulator (LIBERO, robosuite, MuJoCo), loaded once an env is built: registering the type loads none.

@@ -4,8 +4,11 @@ After a reset (a randomised one, or an official init state set), `shift_objects`
 of each named movable object and recomputes the simulation (`sim.forward()`); nothing else of the state changes.
 `shifted_start` draws the offsets from a seeded generator and redraws where a shifted object would overlap another
 object, a fixture or the robot; after the episode's settle steps `settled` checks that the objects came to rest
-where they were put. The shifts are what a policy needs to see for its actions to depend on where the objects are:
-LIBERO's placement regions on libero_object spread the objects by only a few millimetres.
+where they were put. `episode_shift` is one episode's shift, seeded by its reset seed alone: `predvla demos
+--placement-spread-cm` and `lerobot-eval --env.placement_spread_cm` both call it, so a demonstration and an evaluation
+episode whose resets have the same seed start from the same shifted placement. The shifts are what a policy needs to
+see for its actions to depend on where the objects are: LIBERO's placement regions on libero_object spread the
+objects by only a few millimetres.
 """
 
 from collections.abc import Mapping
@@ -96,6 +99,12 @@ def shifted_start(env, rng: np.random.Generator, spread: float,
         env.sim.set_state(state)
         env.sim.forward()
     raise RuntimeError(f"no placement with spread {spread} m in {MAX_DRAWS} draws left every object free")
+
+
+def episode_shift(env, seed: int, spread: float) -> dict[str, np.ndarray]:
+    """`shifted_start` of every movable object at `spread` (m) for the episode whose reset seed is `seed`: the
+    generator is seeded with (seed, PLACEMENT_STREAM), so the offsets depend on the seed (and its reset) only."""
+    return shifted_start(env, np.random.default_rng([seed, PLACEMENT_STREAM]), spread)
 
 
 def settled(before: np.ndarray, after: np.ndarray) -> bool:

@@ -28,6 +28,7 @@ from lerobot_predvla.frontend.oracle import POSE_DIM
 from lerobot_predvla.sims.libero.env import check_libero_config, use_headless_gl
 from lerobot_predvla.sims.libero.object_shift import ShiftedResets, ShiftSpec
 from lerobot_predvla.sims.libero.oracle import object_poses, objects_of_interest
+from lerobot_predvla.sims.libero.placed_resets import PlacedResets, check_placement
 from lerobot_predvla.sims.libero.variants import variant_suite
 
 check_libero_config()  # before LIBERO reads its config: a stale one otherwise fails deep inside a reset
@@ -176,6 +177,22 @@ class SharedRenderer:
 RENDERER = SharedRenderer()
 
 
+class PlacingControlEnv(ControlEnv):
+    """LIBERO's ControlEnv whose `reset` ends with `after_reset(self)`: between the simulator's reset and whatever
+    follows it (in `LiberoEnv.reset`, the settle steps), as `predvla demos` shifts its placements."""
+
+    def __init__(self, *args, after_reset=None, **kwargs):
+        self.after_reset = after_reset
+        super().__init__(*args, **kwargs)
+
+    def reset(self):
+        observation = super().reset()
+        if self.after_reset is None:
+            return observation
+        self.after_reset(self)
+        return self.env._get_observations(force_update=True)
+
+
 class SparseRenderLiberoEnv(LiberoEnv):
     """Renders the cameras only on steps whose images the policy consumes.
 
@@ -189,16 +206,21 @@ class SparseRenderLiberoEnv(LiberoEnv):
     (`environment_state`, `libero.oracle.object_poses`): the inputs of the oracle front end, a diagnostic.
 
     With an active `shift` (`object_shift.ShiftSpec`), each episode starts from its official init state with the object
-    to pick (and/or its place target) moved; `shift_records` keeps one record per counted episode.
+    to pick (and/or its place target) moved; with `placement_spread_cm` > 0 (`placed_resets`), from a randomised reset
+    with every movable object shifted as `predvla demos --placement-spread-cm` shifts them. Either way `shift_records`
+    keeps one record per counted episode.
     """
 
     def __init__(self, *args, render_interval: int = 4, oracle: bool = False, shift: ShiftSpec | None = None,
-                 **kwargs):
+                 placement_spread_cm: float = 0.0, **kwargs):
         super().__init__(*args, **kwargs)
-        if shift is not None and shift.active and not self.init_states:
+        shifting = shift is not None and shift.active
+        check_placement(placement_spread_cm, self.init_states, shifting)
+        if shifting and not self.init_states:
             raise ValueError("--env.object_shift_cm / --env.target_shift_cm move objects from the official init "
                              "states: they need --env.init_states=true.")
-        self.shifts = ShiftedResets(shift) if shift is not None and shift.active else None
+        self.shifts = ShiftedResets(shift) if shifting else None
+        self.placements = PlacedResets(placement_spread_cm) if placement_spread_cm > 0 else None
         self.shift_records: list[dict] = []
         self._official_states = None if self.shifts is None else np.array(self._init_states, copy=True)
         self.render_interval = render_interval
@@ -222,7 +244,8 @@ class SparseRenderLiberoEnv(LiberoEnv):
             return
         # Cameras are not robosuite observables here: rendering them at every physics step is what we avoid.
         # No robosuite renderer either (LIBERO's OffScreenRenderEnv forces one): `RENDERER` draws the cameras.
-        self._env = ControlEnv(
+        self._env = PlacingControlEnv(
+            after_reset=None if self.placements is None else self.placements.place,
             bddl_file_name=self._task_bddl_file,
             camera_heights=self.observation_height,
             camera_widths=self.observation_width,
@@ -273,6 +296,11 @@ class SparseRenderLiberoEnv(LiberoEnv):
             self.init_state_id = (self._rollouts - 1) * self._reset_stride + self.episode_index
         self._steps_since_reset, self._images, self._render_key = 0, None, None
         episode = self.init_state_id  # LiberoEnv.reset starts from official init state episode % 50, then moves on
+        if self.placements is not None:  # lerobot-eval's rollouts only: Gymnasium's autoresets carry no seed
+            if self._counted and seed is None:
+                raise ValueError("--env.placement_spread_cm shifts each episode's objects by its reset seed: run "
+                                 "lerobot-eval with --seed.")
+            self.placements.seed = seed if self._counted else None
         try:
             self._shift_start(episode)
             observation, info = super().reset(seed=seed, **kwargs)
@@ -282,16 +310,25 @@ class SparseRenderLiberoEnv(LiberoEnv):
             self.init_state_id = episode
             self._shift_start(episode)
             observation, info = super().reset(seed=seed, **kwargs)
-        if self.shifts is not None:
-            record = {"episode_ix": episode, "task": self.task, "task_id": self.task_id,
-                      "init_state": episode % len(self._official_states), **self.shifts.settle(self._env)}
+        record = self._shift_record(episode)
+        if record is not None:
             info = {**info, "shift_settled": record["settled"]}
             if self._counted:
                 self.shift_records.append(record)
                 if not record["settled"]:
-                    logging.warning("predvla_libero: a shifted body did not settle where it was put: %s", record)
+                    logging.warning("predvla_libero: shifted objects did not settle where they were put: %s", record)
         self._last_observation = observation
         return observation, info
+
+    def _shift_record(self, episode: int) -> dict | None:
+        """After the reset's settle steps: this episode's shifted objects (`--env.object_shift_cm` or, on lerobot-eval's
+        rollouts, `--env.placement_spread_cm`) and whether they settled; None when nothing was shifted."""
+        where = {"episode_ix": episode, "task": self.task, "task_id": self.task_id}
+        if self.shifts is not None:
+            return {**where, "init_state": episode % len(self._official_states), **self.shifts.settle(self._env)}
+        if self.placements is not None and self._counted:
+            return {**where, **self.placements.settle(self._env)}
+        return None
 
     def _shift_start(self, episode: int) -> None:
         """Put this episode's shifted state where `LiberoEnv.reset` takes its official init state from."""

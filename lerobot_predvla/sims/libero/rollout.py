@@ -9,7 +9,7 @@ from lerobot_predvla.sims.libero.env import fixture_poses, random_reset
 from lerobot_predvla.sims.libero.expert import ExpertFailure
 from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN
 from lerobot_predvla.sims.libero.expert.teleop import TeleopParams, make_expert
-from lerobot_predvla.sims.libero.placement import PLACEMENT_STREAM, object_positions, settled, shifted_start
+from lerobot_predvla.sims.libero.placement import episode_shift, object_positions, settled
 
 SETTLE_STEPS = 5  # idle steps after reset so objects rest on their support (not recorded)
 IDLE = np.array([0, 0, 0, 0, 0, 0, -1.0])
@@ -55,7 +55,7 @@ def run_episode(env, seed: int, max_steps: int, half_turn: str = DEFAULT_HALF_TU
     note = ""
     if placement_spread > 0:
         try:
-            shifted_start(env, np.random.default_rng([seed, PLACEMENT_STREAM]), placement_spread)
+            episode_shift(env, seed, placement_spread)
         except RuntimeError as err:
             note = str(err)
         placed = object_positions(env)
