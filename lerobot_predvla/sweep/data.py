@@ -11,6 +11,7 @@ from concurrent.futures import ThreadPoolExecutor
 from itertools import groupby
 from pathlib import Path
 
+from lerobot_predvla.frontend.artefact import METADATA_FILE
 from lerobot_predvla.lerobot_commands import PREDVLA
 from lerobot_predvla.sims.libero.env import num_tasks, task_spec
 from lerobot_predvla.sims.libero.hdf5_layout import task_file
@@ -68,7 +69,7 @@ class DataStages(Workspace):
         hdf5, frontend = self.sweep_path(spec.hdf5), self.sweep_path(spec.frontend)
         threads = ["--threads", str(spec.frontend_threads)] if spec.frontend_threads != 1 else []
         fitted = fitted_suites(data, suite)
-        fit_missing = not (frontend / "metadata.json").is_file()
+        fit_missing = not (frontend / METADATA_FILE).is_file()
         commands = [c for source in (fitted if fit_missing else [suite]) for c in self.demo_commands(suite, source)]
         if fit_missing:
             roots = list(dict.fromkeys(str(self.sweep_path(data[s].hdf5)) for s in fitted))
