@@ -5,20 +5,16 @@ rollout, whose observation `task` the policy reads, on libero_goal (one scene, t
 task's instruction while success is still the evaluated task's, and `lerobot-eval` records the instructions.
 """
 
-import json
-import subprocess
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 import torch
+from eval_factory import open_loop_eval
 from torch import nn
 
 from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 from lerobot_predvla.sims.libero.instructions import InstructionSource, instruction_summary
 
-CHECKPOINT = Path(__file__).parents[1] / "checkpoints" / "predvla_libero_object_reading"
 TURN_ON_THE_STOVE, BOWL_ON_PLATE = 7, 8  # libero_goal's tasks 7 and 8
 
 
@@ -124,15 +120,8 @@ def test_the_policy_reads_the_other_tasks_instruction_and_success_stays_the_task
 def test_lerobot_eval_records_the_instruction_of_each_task(tmp_path):
     """The committed checkpoint in exact open loop, one 3-step episode per task, tasks 1 and 2 each with task 3's
     instruction."""
-    out = tmp_path / "eval"
-    command = [str(Path(sys.executable).with_name("lerobot-eval")), f"--policy.path={CHECKPOINT}",
-               "--policy.device=cpu", "--policy.er_iterations=0", "--env.type=predvla_libero",
-               "--env.task=libero_object", "--env.task_ids=[1,2]", "--env.episode_length=3",
-               "--env.render_interval=100000", "--env.instruction_from_task=3", "--eval.n_episodes=1",
-               "--eval.batch_size=1", "--eval.use_async_envs=false", f"--output_dir={out}"]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=600)
-    assert result.returncode == 0, result.stderr[-3000:]
-    records = json.loads((out / "eval_info.json").read_text())["predvla_instructions"]["libero_object"]
+    info = open_loop_eval(tmp_path / "eval", "[1,2]", "--env.instruction_from_task=3")
+    records = info["predvla_instructions"]["libero_object"]
     assert [(r["task_id"], r["instruction_from_task"]) for r in records] == [(1, 3), (2, 3)]
     assert {r["instruction"] for r in records} == {"pick up the bbq sauce and place it in the basket"}
     assert records[0]["own_instruction"] != records[0]["instruction"]
