@@ -24,6 +24,7 @@ from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM, LEROBOT_LIBERO_STATE
 from lerobot_predvla.policies.common.cached_features import CachedFeaturesConfig
 from lerobot_predvla.sims.libero.config_path import use_venv_config
 from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv, fault_summary, libero_env_processors
+from lerobot_predvla.sims.libero.instructions import instruction_summary
 from lerobot_predvla.sims.libero.object_shift import shift_summary
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
 from lerobot_predvla.utils.checkpoints import (
@@ -95,7 +96,8 @@ def eval_policy_all(envs: dict, policy, env_preprocessor, *args, **kwargs) -> di
     """LeRobot's `eval_policy_all`, plus the `predvla_faults` section (written into eval_info.json): faulted episodes
     with their reasons, non-finite actions, observations the policy masked, actions it replaced, injected faults; and
     with shifted objects (`--env.object_shift_cm`, `--env.placement_spread_cm`), the `predvla_shifts` section: every
-    episode's shift and whether the shifted bodies settled where they were put.
+    episode's shift and whether the shifted bodies settled where they were put; and the `predvla_instructions` section:
+    each task's own instruction and the one it was run with (`--env.instruction_from_task`, `--env.instruction_shift`).
 
     Replaces: `lerobot.scripts.lerobot_eval.eval_policy_all` (which `lerobot-eval` calls from its own module, and
     `lerobot-train`'s periodic evaluation through the name it imported, left unchanged).
@@ -105,6 +107,9 @@ def eval_policy_all(envs: dict, policy, env_preprocessor, *args, **kwargs) -> di
     """
     info = _lerobot_eval_policy_all(envs, policy, env_preprocessor, *args, **kwargs)
     info["predvla_faults"] = fault_summary(envs, policy, env_preprocessor)
+    instructions = instruction_summary(envs)
+    if instructions:
+        info["predvla_instructions"] = instructions
     shifts = shift_summary(envs)
     if shifts is not None:
         info["predvla_shifts"] = shifts

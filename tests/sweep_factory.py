@@ -8,6 +8,8 @@ import torch
 import yaml
 from safetensors.torch import save_file
 
+from lerobot_predvla.frontend.artefact import METADATA_FILE
+
 
 def sweep_file(tmp_path: Path, **changes) -> Path:
     (tmp_path / "L3.json").write_text(json.dumps({"type": "predvla", "er_iterations": 0, "tau": [1, 1, 1, 1]}))
@@ -103,7 +105,7 @@ class FakeData(FakeLeRobot):
                 path.write_text("demos")
         elif stage == "fit-frontend":
             Path(value["--out"]).mkdir(parents=True)
-            (Path(value["--out"]) / "metadata.json").write_text("{}")
+            (Path(value["--out"]) / METADATA_FILE).write_text("{}")
         else:
             (Path(value["--out"]) / "meta").mkdir(parents=True)
             (Path(value["--out"]) / "meta" / "info.json").write_text("{}")

@@ -246,7 +246,7 @@ def test_shipped_checkpoint_processors_follow_the_policy(checkpoint):
 def test_push_clears_the_training_machine(tmp_path):
     config, train, pre = tmp_path / "config.json", tmp_path / "train_config.json", tmp_path / "policy_preprocessor.json"
     artefact = tmp_path / "frontend.json"
-    fit = {"hdf5_root": "/data/hdf5", "suites": ["libero_object"], "num_demos": 500}
+    fit = {"hdf5_root": "/data/hdf5", "suites": ["libero_object"], "num_demos": 500}  # an artefact before by_suite
     config.write_text(json.dumps({"type": "predvla", "device": "cuda", "frontend_dir": "/data/frontend",
                                   "pretrained_path": "/runs/x/checkpoints/last/pretrained_model"}))
     train.write_text(json.dumps({"policy": {"type": "predvla", "device": "cpu", "pretrained_path": "/runs/x/p"},
@@ -268,6 +268,16 @@ def test_push_clears_the_training_machine(tmp_path):
         {"artefact": {"format": "predvla-frontend", "fit": cleared}},
         {"device": "cpu", "float_dtype": None}]  # LeRobot's loaders replace the device step's
     assert json.loads(published["predvla_frontend/frontend.json"])["fit"] == cleared
+    # A joint fit's folders, one per suite, are cleared too.
+    joint = {"hdf5_roots": ["/a", "/b"], "suites": ["libero_object", "libero_goal"],
+             "by_suite": {"libero_object": {"hdf5_root": "/a", "num_demos": 500},
+                          "libero_goal": {"hdf5_root": "/b", "num_demos": 500}}}
+    artefact.write_text(json.dumps({"format": "predvla-frontend", "fit": joint}))
+    published = without_machine_paths({"predvla_frontend/frontend.json": artefact})
+    assert json.loads(published["predvla_frontend/frontend.json"])["fit"] == {
+        "hdf5_roots": None, "suites": ["libero_object", "libero_goal"],
+        "by_suite": {"libero_object": {"hdf5_root": None, "num_demos": 500},
+                     "libero_goal": {"hdf5_root": None, "num_demos": 500}}}
 
 
 def absolute_paths(value) -> list[str]:

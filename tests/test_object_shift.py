@@ -5,19 +5,16 @@ simulator tests build real environments: a shifted object rests where it was put
 variant family that loads runs a few steps, and `lerobot-eval` writes the shifts into eval_info.json.
 """
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from eval_factory import open_loop_eval
 
 from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
 from lerobot_predvla.sims.libero.object_shift import ShiftSpec, pick_and_place, settle_motion, shift_summary
 from lerobot_predvla.sims.libero.variants import parse_variant, task_key
 
-CHECKPOINT = Path(__file__).parents[1] / "checkpoints" / "predvla_libero_object_reading"
 IDLE = np.array([[0, 0, 0, 0, 0, 0, -1]], dtype=np.float32)
 
 
@@ -195,15 +192,7 @@ def test_variants_that_do_not_load_say_why(task, missing):
 @pytest.mark.simulator
 def test_lerobot_eval_writes_the_shifts_into_eval_info(tmp_path):
     """The committed checkpoint in exact open loop, one 3-step episode with the object shifted 2 cm."""
-    out = tmp_path / "eval"
-    command = [str(Path(sys.executable).with_name("lerobot-eval")), f"--policy.path={CHECKPOINT}",
-               "--policy.device=cpu", "--policy.er_iterations=0", "--env.type=predvla_libero",
-               "--env.task=libero_object", "--env.task_ids=[1]", "--env.episode_length=3",
-               "--env.render_interval=100000", "--env.object_shift_cm=2", "--eval.n_episodes=1",
-               "--eval.batch_size=1", "--eval.use_async_envs=false", f"--output_dir={out}"]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=600)
-    assert result.returncode == 0, result.stderr[-3000:]
-    shifts = json.loads((out / "eval_info.json").read_text())["predvla_shifts"]
+    shifts = open_loop_eval(tmp_path / "eval", "[1]", "--env.object_shift_cm=2")["predvla_shifts"]
     assert shifts["spec"]["object_cm"] == 2 and shifts["unsettled_episodes"] == []
     (episode,) = shifts["episodes"]
     assert episode["task_id"] == 1 and episode["bodies"][0]["name"] == "cream_cheese_1"

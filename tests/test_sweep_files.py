@@ -339,3 +339,37 @@ def test_d3_is_also_evaluated_from_resets_placed_like_its_demonstrations(tmp_pat
                                                    tmp_path / "ckpt", tmp_path / "out", [])
     assert arg(command, "env.init_states") == "false" and arg(command, "seed") == "3000"
     assert arg(command, "env.placement_spread_cm") == "3" and arg(command, "env.render_interval") == "100000"
+
+
+def test_the_four_suite_sweep_fits_one_front_end_on_all_four_suites(tmp_path):
+    """libero_four_suites.yaml: Table 2's data settings for every suite, one front end fitted on all four suites'
+    demonstrations (libero_object's read where Table 2's data stage made them), each suite converted with it."""
+    configs = Path(__file__).parents[1] / "configs" / "sweeps"
+    sweep = Sweep.load(configs / "libero_four_suites.yaml")
+    table2 = Sweep.load(configs / "libero_object_table2.yaml").settings.data["libero_object"]
+    suites = ["libero_spatial", "libero_object", "libero_goal", "libero_10"]
+    assert sweep.settings.suites == suites and sweep.settings.seeds == [0] and sweep.settings.steps == 30000
+    for suite in suites:
+        data = sweep.settings.data[suite]
+        assert data.frontend_from == suites and data.frontend.endswith("outputs/libero_four_suites/frontend")
+        same = ("per_task", "render_interval", "demo_seed", "init_noise", "half_turn", "hold_steps", "style",
+                "image_storage", "frontend_threads", "vision_weights", "language_from", "frame_stride")
+        assert {k: getattr(data, k) for k in same} == {k: getattr(table2, k) for k in same}
+    assert sweep.settings.data["libero_object"].hdf5 == table2.hdf5
+    runner = Runner(sweep, tmp_path)
+    stages = dict(runner.data_commands("libero_spatial"))
+    fit = stages["frontend"]
+    assert fit[fit.index("--suites") + 1] == ",".join(suites)
+    assert [fit[i + 1] for i, a in enumerate(fit) if a == "--hdf5-root"] == [
+        str(runner.sweep_path(sweep.settings.data[s].hdf5)) for s in ("libero_spatial", "libero_object")]
+    assert {c[c.index("--suite") + 1] for s, c in stages.items() if s.startswith("demos")} == set(suites)
+    train = {s: runner.train_command(sweep.configs["olt"], s, 0) for s in suites}
+    assert "--policy.open_loop_weight=1.0" in train["libero_object"]
+    assert "--policy.posteriors_fit_actions=false" in train["libero_object"]
+    assert "--policy.sequence_length=500" in train["libero_10"] and "--policy.tau=[30,14,8,2]" in train["libero_10"]
+    assert "--policy.sequence_length=300" in train["libero_goal"]
+    assert not any("sequence_length" in a for a in train["libero_spatial"] + train["libero_object"])
+    language = sweep.configs["olt_open_loop_other_instruction"]
+    assert "--env.instruction_shift=1" in language.eval_args and language.compare_to == "olt_open_loop"
+    assert sweep.configs["B1"].lr_sweep.rates == [0.0001, 0.0003, 0.001, 0.003]
+    assert sweep.steps_of(sweep.configs["B2"]) == 50000

@@ -29,8 +29,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="Fit the frozen front end's PCA bases on LIBERO hdf5 demonstrations or a LeRobot dataset.",
         description=__doc__,
     )
-    parser.add_argument("--hdf5-root", type=Path, default=None, help="Directory with <suite>/*_demo.hdf5.")
-    parser.add_argument("--suites", default=",".join(SUITES), help="Comma-separated suites to pool.")
+    parser.add_argument(
+        "--hdf5-root", type=Path, action="append", default=None,
+        help="Directory with <suite>/*_demo.hdf5; repeat it for suites made in different places (each suite is read "
+        "from the one root that has its folder).",
+    )
+    parser.add_argument(
+        "--suites", default=",".join(SUITES),
+        help="Comma-separated suites whose demonstrations are pooled: one joint fit of the PCA bases on all their "
+        "frames, as the paper fits them on all four suites (default: all four).",
+    )
     add_dataset_source_arguments(parser)
     parser.add_argument(
         "--vision-weights", default="imagenet",
@@ -132,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
         if args.hdf5_root is None:
             raise ValueError("give --hdf5-root (LIBERO hdf5) or --dataset-root/--dataset-repo-id (LeRobot dataset).")
         cfg = FitFrontendConfig(
-            hdf5_root=args.hdf5_root,
+            hdf5_roots=tuple(args.hdf5_root),
             suites=tuple(s.strip() for s in args.suites.split(",") if s.strip()),
             **_encoding_settings(args),
             preprocessing=PreprocessingSpec(image_size=args.image_size),
@@ -144,9 +152,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"predvla fit-frontend: error: {err}", file=sys.stderr)
         return 2
     fit = artefact.fit
+    per_suite = ", ".join(f"{suite} {c['num_demos']}/{c['num_frames']}" for suite, c in fit["by_suite"].items())
     print(
-        f"fitted front end on {fit['num_demos']} demos / {fit['num_frames']} frames of {', '.join(cfg.suites)} "
-        f"({fit['num_distinct_instructions']} distinct instructions) in {fit['seconds']} s -> {args.out}"
+        f"fitted front end on {fit['num_demos']} demos / {fit['num_frames']} frames ({per_suite}; visual PCA on "
+        f"{fit['num_frames_fitted']} frames) with {fit['num_distinct_instructions']} distinct instructions in "
+        f"{fit['seconds']} s -> {args.out}"
     )
     print(variance_summary(artefact))
     return 0

@@ -9,7 +9,7 @@ import torch
 from tqdm import tqdm
 
 from lerobot_predvla.columns import HDF5_CAMERAS, SUITES
-from lerobot_predvla.data.libero_hdf5 import read_demo, scan_suites
+from lerobot_predvla.data.libero_hdf5 import DemoRef, read_demo, scan_suites
 from lerobot_predvla.frontend.artefact import FrontendArtefact
 from lerobot_predvla.frontend.language import LanguageEncoder
 from lerobot_predvla.frontend.pca import fit_pca
@@ -26,8 +26,10 @@ class FitFrontendConfig:
     """Settings of `predvla fit-frontend`.
 
     Args:
-        hdf5_root: Directory holding one sub-directory of `*_demo.hdf5` files per suite.
-        suites: Suites whose demonstrations are pooled (the paper pools all four).
+        hdf5_roots: Directories holding one sub-directory of `*_demo.hdf5` files per suite; each suite is read from
+            the one root that has its folder (`suite_roots`), so suites made in different places fit together.
+        suites: Suites whose demonstrations are pooled: the PCA bases are fitted jointly on all their frames (the
+            paper fits them on the training demonstrations of all four suites, Section 4.1).
         vision_weights: ResNet18 weights.
         language_dim: Language PCA components (Table 1: 64).
         vision_dim_per_camera: Visual PCA components per camera (Table 1: 96).
@@ -43,7 +45,7 @@ class FitFrontendConfig:
             task gives all-zero language features and two tasks a rank-1 basis.
     """
 
-    hdf5_root: Path
+    hdf5_roots: tuple[Path, ...]
     vision_weights: VisionWeights
     suites: tuple[str, ...] = SUITES
     language_dim: int = 64
@@ -60,12 +62,12 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
     if cfg.frame_stride < 1:
         raise ValueError(f"frame_stride must be >= 1, got {cfg.frame_stride}.")
     start = time.perf_counter()
-    refs = scan_suites(cfg.hdf5_root, list(cfg.suites))
+    refs = scan_suites(cfg.hdf5_roots, list(cfg.suites))
     vision = VisionEncoder(cfg.vision_weights, cfg.precision, batch_size=cfg.batch_size)
     language = LanguageEncoder()
 
     features: dict[str, list[torch.Tensor]] = {camera: [] for camera in HDF5_CAMERAS}
-    total = sum(len(range(0, ref.num_frames, cfg.frame_stride)) for ref in refs)
+    total = demonstration_counts(refs, cfg.frame_stride)["num_frames_fitted"]
     with tqdm(total=total, desc="encoding frames", unit="frame") as progress:
         for ref in refs:
             demo = read_demo(ref, cfg.frame_stride)
@@ -84,16 +86,37 @@ def fit_frontend(cfg: FitFrontendConfig) -> FrontendArtefact:
     return fitted_artefact(
         vision, language, instructions, features, cfg.language_dim, cfg.vision_dim_per_camera, cfg.preprocessing, start,
         fit={
-            "hdf5_root": str(Path(cfg.hdf5_root).resolve()),
+            "hdf5_roots": [str(Path(root).resolve()) for root in cfg.hdf5_roots],
             "suites": list(cfg.suites),
-            "num_files": len({ref.file for ref in refs}),
-            "num_demos": len(refs),
-            "num_frames": sum(ref.num_frames for ref in refs),
+            **demonstration_counts(refs, cfg.frame_stride),
+            "by_suite": {
+                suite: {
+                    "hdf5_root": str(ref_group[0].file.parent.parent.resolve()),
+                    **demonstration_counts(ref_group, cfg.frame_stride),
+                }
+                for suite, ref_group in group_by_suite(refs, cfg.suites).items()
+            },
             "frame_stride": cfg.frame_stride,
             "num_distinct_instructions": len(set(instructions)),
             "language_fit_on": "task list" if cfg.language_instructions else "demonstrations",
         },
     )
+
+
+def group_by_suite(refs: list[DemoRef], suites: tuple[str, ...]) -> dict[str, list[DemoRef]]:
+    """`refs` by suite (the folder `<root>/<suite>` each file is in), in the order of `suites`."""
+    return {suite: [ref for ref in refs if ref.file.parent.name == suite] for suite in suites}
+
+
+def demonstration_counts(refs: list[DemoRef], frame_stride: int) -> dict[str, int]:
+    """Files, demonstrations and frames of `refs`, and the frames the visual PCA is fitted on (every
+    `frame_stride`-th of each demonstration)."""
+    return {
+        "num_files": len({ref.file for ref in refs}),
+        "num_demos": len(refs),
+        "num_frames": sum(ref.num_frames for ref in refs),
+        "num_frames_fitted": sum(len(range(0, ref.num_frames, frame_stride)) for ref in refs),
+    }
 
 
 def fitted_artefact(

@@ -7,6 +7,7 @@ before any work starts.
 
 import json
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -129,9 +130,46 @@ def scan_file(path: Path | str) -> list[DemoRef]:
         raise LiberoDataError(path, f"corrupt or unreadable HDF5 file ({err})") from err
 
 
-def scan_suites(hdf5_root: Path | str, suites: list[str]) -> list[DemoRef]:
-    """Validate every file of the given suites; all demonstrations must share image shapes."""
-    refs = [ref for suite in suites for path in suite_files(hdf5_root, suite) for ref in scan_file(path)]
+def suite_roots(hdf5_roots: Sequence[Path | str], suites: Sequence[str]) -> dict[str, Path]:
+    """The root of each suite's folder `<root>/<suite>`: the one of `hdf5_roots` that holds it.
+
+    Several roots let one fit pool suites whose demonstrations were made in different places. A suite found in no
+    root or in several, and a root that is missing or holds none of the suites, is an error naming the folders.
+    """
+    roots = [Path(root) for root in hdf5_roots]
+    if not roots or not suites:
+        raise ValueError(f"give at least one hdf5 root and one suite, got roots {roots} and suites {list(suites)}.")
+    repeated = sorted({suite for suite in suites if list(suites).count(suite) > 1})
+    if repeated:
+        raise ValueError(f"suites {repeated} are named more than once; each suite's demonstrations are read once.")
+    for root in roots:
+        if not root.is_dir():
+            raise LiberoDataError(root, "hdf5 root does not exist (expected <root>/<suite>/*_demo.hdf5)")
+        if len(roots) > 1 and not any((root / suite).is_dir() for suite in suites):
+            raise LiberoDataError(root, f"hdf5 root holds none of the suites {list(suites)} (no <root>/<suite> folder)")
+    found = {}
+    for suite in suites:
+        holders = [root for root in roots if (root / suite).is_dir()]
+        if not holders:
+            raise LiberoDataError(
+                roots[0] / suite if len(roots) == 1 else ", ".join(str(root / suite) for root in roots),
+                f"suite directory of '{suite}' does not exist",
+            )
+        if len(holders) > 1:
+            raise LiberoDataError(
+                ", ".join(str(root / suite) for root in holders),
+                f"suite '{suite}' is in several hdf5 roots; give each suite's demonstrations once",
+            )
+        found[suite] = holders[0]
+    return found
+
+
+def scan_suites(hdf5_roots: Path | str | Sequence[Path | str], suites: Sequence[str]) -> list[DemoRef]:
+    """Validate every file of the given suites, each in the one of `hdf5_roots` that holds it (`suite_roots`); all
+    demonstrations must share image shapes."""
+    roots = [hdf5_roots] if isinstance(hdf5_roots, Path | str) else hdf5_roots
+    located = suite_roots(roots, suites)
+    refs = [ref for suite in suites for path in suite_files(located[suite], suite) for ref in scan_file(path)]
     first = refs[0]
     for ref in refs:
         if ref.image_shapes != first.image_shapes:

@@ -94,7 +94,7 @@ def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
     """The files as every route publishes them: the training machine's paths and device cleared from the configs.
 
     `frontend_dir` (the artefact is published beside the weights and inside the preprocessor), `pretrained_path`, the
-    dataset root, the output and checkpoint directories and the front end's fitting data (`fit.hdf5_root` of the
+    dataset root, the output and checkpoint directories and the front end's fitting data (the folders of `fit` in the
     artefact, in `predvla_frontend/` and in the preprocessor) name places on the training machine only; loading
     ignores them once they are None. The device is the training machine's too. LeRobot keeps a stored device that is
     available and picks the best available one when it is None: `config.json`'s when loading the policy
@@ -135,11 +135,16 @@ def without_machine_paths(files: dict[str, Path]) -> dict[str, Path | bytes]:
 
 
 def without_fit_root(artefact: dict | None) -> None:
-    """Clear, in place, the directory a front-end artefact's PCA bases were fitted on (its `fit.hdf5_root`); the
-    rest of `fit` (suites, demonstrations, frames) says what they were fitted on."""
+    """Clear, in place, the directories a front-end artefact's PCA bases were fitted on (its `fit.hdf5_root`, or
+    `fit.hdf5_roots` and each `fit.by_suite.<suite>.hdf5_root`); the rest of `fit` (suites, demonstrations, frames)
+    says what they were fitted on."""
     fit = artefact.get("fit") if isinstance(artefact, dict) else None
-    if isinstance(fit, dict) and "hdf5_root" in fit:
-        fit["hdf5_root"] = None
+    if not isinstance(fit, dict):
+        return
+    for record in [fit, *(fit.get("by_suite") or {}).values()]:
+        for key in ("hdf5_root", "hdf5_roots"):
+            if isinstance(record, dict) and key in record:
+                record[key] = None
 
 
 

@@ -1,6 +1,8 @@
 """The data stages of a sweep: a suite's dataset made before its first training, from the sweep file's `data`
 entry (`predvla demos`, `predvla fit-frontend`, `predvla convert`) and its `train_root` copy without camera frames
-(`predvla features-only`). Each stage is skipped once its output exists, so a killed sweep resumes."""
+(`predvla features-only`). Each stage is skipped once its output exists, so a killed sweep resumes. A front end
+shared by several suites (`data.<suite>.frontend_from`) is fitted in the data stage of the first of them that
+runs, after every one of their demonstrations is made; the others then only convert."""
 
 import json
 import sys
@@ -9,11 +11,12 @@ from concurrent.futures import ThreadPoolExecutor
 from itertools import groupby
 from pathlib import Path
 
+from lerobot_predvla.frontend.artefact import METADATA_FILE
 from lerobot_predvla.lerobot_commands import PREDVLA
 from lerobot_predvla.sims.libero.env import num_tasks, task_spec
 from lerobot_predvla.sims.libero.hdf5_layout import task_file
+from lerobot_predvla.sweep.data_spec import DataSpec, fitted_suites
 from lerobot_predvla.sweep.layout import data_stages_path
-from lerobot_predvla.sweep.spec import DataSpec
 from lerobot_predvla.sweep.workspace import Workspace
 from lerobot_predvla.utils.io import atomic_write_json
 
@@ -53,58 +56,32 @@ class DataStages(Workspace):
         return commands
 
     def source_data_commands(self, suite: str) -> list[tuple[str, list[str]]]:
-        """(stage, command) still to run to make `suite`'s `root` dataset from its `data` entry."""
-        spec = self.sweep.settings.data.get(suite)
+        """(stage, command) still to run to make `suite`'s `root` dataset from its `data` entry: the demonstrations
+        its front end is fitted on (every suite of `frontend_from` while the front end is missing, else its own),
+        the front-end fit, and the conversion."""
+        data = self.sweep.settings.data
+        spec = data.get(suite)
         if spec is None:
             return []
         dataset = self.sweep_path(self.sweep.settings.datasets[suite]["root"])
         if (dataset / "meta" / "info.json").is_file():
             return []
         hdf5, frontend = self.sweep_path(spec.hdf5), self.sweep_path(spec.frontend)
-        commands = []
         threads = ["--threads", str(spec.frontend_threads)] if spec.frontend_threads != 1 else []
-        missing = self.missing_demo_tasks(suite, spec, hdf5)
-        shares = [missing[k :: spec.workers] for k in range(min(spec.workers, len(missing)))]
-        for k, share in enumerate(shares):
-            commands.append(
-                (
-                    "demos" if len(shares) == 1 else f"demos.tasks{k}",
-                    [
-                        *PREDVLA,
-                        "demos",
-                        "--suite",
-                        suite,
-                        "--tasks",
-                        ",".join(map(str, share)),
-                        "--per-task",
-                        str(spec.per_task),
-                        "--render-interval",
-                        str(spec.render_interval),
-                        "--seed",
-                        str(spec.demo_seed),
-                        "--init-noise",
-                        str(spec.init_noise),
-                        "--half-turn",
-                        spec.half_turn,
-                        "--hold-steps",
-                        str(spec.hold_steps),
-                        *style_args(spec),
-                        "--out",
-                        str(hdf5),
-                    ],
-                )
-            )
-        if not (frontend / "metadata.json").is_file():
+        fitted = fitted_suites(data, suite)
+        fit_missing = not (frontend / METADATA_FILE).is_file()
+        commands = [c for source in (fitted if fit_missing else [suite]) for c in self.demo_commands(suite, source)]
+        if fit_missing:
+            roots = list(dict.fromkeys(str(self.sweep_path(data[s].hdf5)) for s in fitted))
             commands.append(
                 (
                     "frontend",
                     [
                         *PREDVLA,
                         "fit-frontend",
-                        "--hdf5-root",
-                        str(hdf5),
+                        *(arg for root in roots for arg in ("--hdf5-root", root)),
                         "--suites",
-                        suite,
+                        ",".join(fitted),
                         "--vision-weights",
                         spec.vision_weights,
                         "--language-from",
@@ -142,13 +119,52 @@ class DataStages(Workspace):
         )
         return commands
 
+    def demo_commands(self, suite: str, source: str) -> list[tuple[str, list[str]]]:
+        """(stage, command) of `source`'s missing demonstrations, made in `suite`'s data stage: `demos` (or
+        `demos.tasks<k>`, one per `data.workers` share); `demos.<source>...` for another suite whose demonstrations
+        `suite`'s front end is fitted on."""
+        spec = self.sweep.settings.data[source]
+        hdf5 = self.sweep_path(spec.hdf5)
+        missing = self.missing_demo_tasks(source, spec, hdf5)
+        shares = [missing[k :: spec.workers] for k in range(min(spec.workers, len(missing)))]
+        stage = "demos" if source == suite else f"demos.{source}"
+        return [
+            (
+                stage if len(shares) == 1 else f"{stage}.tasks{k}",
+                [
+                    *PREDVLA,
+                    "demos",
+                    "--suite",
+                    source,
+                    "--tasks",
+                    ",".join(map(str, share)),
+                    "--per-task",
+                    str(spec.per_task),
+                    "--render-interval",
+                    str(spec.render_interval),
+                    "--seed",
+                    str(spec.demo_seed),
+                    "--init-noise",
+                    str(spec.init_noise),
+                    "--half-turn",
+                    spec.half_turn,
+                    "--hold-steps",
+                    str(spec.hold_steps),
+                    *style_args(spec),
+                    "--out",
+                    str(hdf5),
+                ],
+            )
+            for k, share in enumerate(shares)
+        ]
+
     @staticmethod
     def missing_demo_tasks(suite: str, spec: DataSpec, hdf5: Path) -> list[int]:
         tasks = spec.tasks if spec.tasks is not None else range(num_tasks(suite))
         return [t for t in tasks if not task_file(hdf5, task_spec(suite, t)).is_file()]
 
     def make_data(self, suite: str) -> bool:
-        """Run the missing data stages of `suite` (the `demos.tasks<k>` shares of `data.workers` at once),
+        """Run the missing data stages of `suite` (the `demos[.<suite>].tasks<k>` shares of `data.workers` at once),
         recording each one's command and wall time in `RUNS_DIR/data/<suite>.json`; False when one failed."""
         stages_file = data_stages_path(self.runs_dir, suite)
 
@@ -157,7 +173,7 @@ class DataStages(Workspace):
             code = self.execute(command, self.log_path("data", suite, 0, stage))
             return stage, command, code, time.monotonic() - start
 
-        for _, group in groupby(self.data_commands(suite), key=lambda item: item[0].split(".")[0]):
+        for _, group in groupby(self.data_commands(suite), key=lambda item: item[0].split(".tasks")[0]):
             group = list(group)
             with ThreadPoolExecutor(max_workers=len(group)) as pool:
                 finished = list(pool.map(lambda item: run_stage(*item), group))

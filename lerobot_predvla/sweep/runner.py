@@ -80,7 +80,8 @@ class Runner(Training, Evaluation):
                 continue
             out = self.train_dir(trained, suite, seed)
             if suite not in data_done and not (out / TRAIN_DONE_FILE).is_file():
-                commands += [command for _, command in self.data_commands(suite)]
+                # A shared front end's demonstrations and fit are in the data stage of each of its suites: list once.
+                commands += [c for _, c in self.data_commands(suite) if c not in commands]
                 data_done.add(suite)
             if (out / TRAIN_DONE_FILE).is_file():
                 checkpoint = self.evaluable_checkpoint(json.loads((out / TRAIN_DONE_FILE).read_text()), out)

@@ -12,14 +12,12 @@ from pathlib import Path
 import yaml
 
 from lerobot_predvla.columns import SUITES
-from lerobot_predvla.data.conversion import IMAGE_STORAGES
 from lerobot_predvla.lerobot_commands import policy_args
 from lerobot_predvla.policies.recipe import NOT_RECIPE
-from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
-from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE, STYLES
 from lerobot_predvla.sims.libero.object_shift import ShiftSpec
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE, PAPER_EPISODE_LENGTH, PAPER_EPISODES_PER_TASK
 from lerobot_predvla.sims.libero.variants import parse_variant
+from lerobot_predvla.sweep.data_spec import DataSpec, data_problems
 from lerobot_predvla.sweep.lr_selection import LRSweep, candidate_name
 
 PAPER_TRAIN_STEPS = 30_000
@@ -196,71 +194,6 @@ class Settings:
     data: dict[str, "DataSpec"] = field(default_factory=dict)  # suite -> how its dataset is made
 
 
-@dataclass
-class DataSpec:
-    """How `predvla sweep` makes a suite's dataset before training: expert demonstrations (`predvla demos`), the
-    front end (`predvla fit-frontend`) and the conversion (`predvla convert`) into the suite's `datasets` root.
-    Each stage is skipped when its output exists (demonstrations task by task), so a killed run resumes.
-
-    Args:
-        hdf5: Root of the demonstrations (`<hdf5>/<suite>/*_demo.hdf5`).
-        frontend: Directory of the fitted front-end artefact.
-        per_task: Successful expert demonstrations per task (the paper's datasets have 50).
-        tasks: Task ids (default: every task of the suite).
-        render_interval: Render the cameras every k-th step (4 = PredVLA's visual refresh).
-        demo_seed: Seed of the randomised resets of the demonstrations.
-        init_noise: Std (rad) of the noise on the arm's initial joint angles of the demonstrations
-            (`predvla demos --init-noise`; 0: LIBERO ControlEnv's fixed start, 0.02: the official init states').
-        half_turn: Which of a finger direction and its half turn the expert grasps with (`predvla demos
-            --half-turn`): 'nearest' (the current fingers') or 'wrist_centre' (the wrist joint nearer the middle of
-            its range: one wrist branch per task also with init_noise).
-        hold_steps: Idle steps (arm still, gripper open) recorded after each demonstration's success (`predvla demos
-            --hold-steps`; 0: episodes end at success, as LIBERO's).
-        style: Who executes the expert's plan (`predvla demos --style`): 'scripted' (every earlier dataset) or
-            'teleop' (the teleoperator model, sims/libero/expert/teleop.py).
-        diversity: With style 'teleop': how strongly the teleoperator perturbs the plan (`--diversity`; 0: the script's
-            actions, 1: the committed setting).
-        placement_spread: Std (cm, per axis) of a seeded x, y shift of every movable object after each reset
-            (`predvla demos --placement-spread-cm`; 0: LIBERO's placements).
-        vision_weights: ResNet18 weights of the front end ('imagenet', a .pth file, or 'random': the offline
-            substitute, printed as such).
-        language_from: Instructions of the language PCA: 'libero' (all 40 of the task list, Section 4.1) or 'demos'.
-        frame_stride: Fit the visual PCA on every n-th frame.
-        workers: `predvla demos` processes run at once (one per CPU core), each on every `workers`-th missing task
-            (logs `seed0.demos.tasks<k>.log`). The demonstrations are the same for any value: an episode's seed
-            depends only on `demo_seed`, its task and its attempt.
-        oracle: Convert with the oracle front end (`predvla convert --oracle`, a diagnostic: the simulator's object
-            poses relative to the gripper instead of the cameras' features; docs/frontend.md). False by default.
-        image_storage: The converted dataset's camera frames (`predvla convert --image-storage`): 'video' (default),
-            'png', or 'none': the cached features only, which is all training reads (the same columns and values
-            as the `features-only` copy of a dataset with frames), without encoding the frames as video, the
-            longest part of a conversion. With 'none', `datasets.<suite>.root` is the training dataset itself.
-        frontend_threads: Torch threads of the image encoder in the front-end fit and the conversion
-            (`--threads`), which run after the demonstrations, alone: the cores the demonstrations used. The
-            features are the same for any count.
-    """
-
-    hdf5: str
-    frontend: str
-    per_task: int = 50
-    tasks: list[int] | None = None
-    render_interval: int = 4
-    demo_seed: int = 0
-    init_noise: float = 0.0
-    half_turn: str = DEFAULT_HALF_TURN
-    hold_steps: int = 0
-    style: str = DEFAULT_STYLE
-    diversity: float = 1.0
-    placement_spread: float = 0.0
-    vision_weights: str = "imagenet"
-    language_from: str = "libero"
-    frame_stride: int = 4
-    workers: int = 1
-    oracle: bool = False
-    image_storage: str = "video"
-    frontend_threads: int = 1
-
-
 @dataclass(frozen=True)
 class Run:
     config: str
@@ -364,16 +297,9 @@ class Sweep:
                     f"{path}: train.publish {settings.publish!r}: expected a folder with only {{config}}, "
                     f"{{suite}} and {{seed}} to fill in ({err!r})."
                 ) from err
-        for suite, spec in settings.data.items():
-            for name, choices in (("half_turn", HALF_TURN_RULES), ("style", STYLES), ("image_storage", IMAGE_STORAGES)):
-                if getattr(spec, name) not in choices:
-                    raise SweepError(
-                        f"{path}: data.{suite}.{name} must be one of {choices}, got {getattr(spec, name)!r}."
-                    )
-            for name, least in (("hold_steps", 0), ("diversity", 0), ("placement_spread", 0), ("workers", 1),
-                                ("frontend_threads", 1)):
-                if getattr(spec, name) < least:
-                    raise SweepError(f"{path}: data.{suite}.{name} must be >= {least}, got {getattr(spec, name)}.")
+        problems = data_problems(settings.data, path.parent)
+        if problems:
+            raise SweepError(f"{path}: {problems[0]}")
         sweep = cls(settings, {}, path.parent)
         for spec in configs:
             if spec.name in sweep.configs:

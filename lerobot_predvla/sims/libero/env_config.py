@@ -39,6 +39,7 @@ from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 
 from lerobot_predvla.columns import GRIPPER_DIM, JOINT_DIM
 from lerobot_predvla.sims.libero.fault_injection import FaultInjectionStep
+from lerobot_predvla.sims.libero.instructions import InstructionSource
 from lerobot_predvla.sims.libero.object_shift import ShiftSpec
 from lerobot_predvla.sims.libero.placed_resets import check_placement
 from lerobot_predvla.sims.libero.protocol import EVAL_ENV_TYPE
@@ -111,6 +112,11 @@ class PredVLALiberoEnv(LiberoEnv):
             `--env.init_states=false` and a seed (lerobot-eval's default is 1000); cannot be combined with
             `--env.object_shift_cm` or `--env.target_shift_cm`. Every episode's offsets and whether the objects
             settled (within 1 cm) go to eval_info.json's `predvla_shifts` section.
+        instruction_from_task: Run every selected task with this task's instruction (same suite), keeping the
+            task's own scene, goal and success check (`instructions`); None (default): each task's own.
+        instruction_shift: Run task k with task (k + instruction_shift) mod n's instruction (1: every task with the
+            next one's, a paired evaluation of all tasks); 0 (default): each task's own. The instruction each task
+            got is in eval_info.json (`predvla_instructions`).
 
     `--env.task` also takes LIBERO-PRO and LIBERO-plus variants, e.g. `libero_object_pro_temp_x0.1` or
     `libero_object_plus_language_3` (`variants`).
@@ -129,6 +135,8 @@ class PredVLALiberoEnv(LiberoEnv):
     object_shift_directions: int = 8
     shift_tolerance_cm: float = 1.0
     placement_spread_cm: float = 0.0
+    instruction_from_task: int | None = None
+    instruction_shift: int = 0
 
     def __post_init__(self):
         super().__post_init__()
@@ -138,6 +146,7 @@ class PredVLALiberoEnv(LiberoEnv):
             raise ValueError(f"--env.obs_type must be 'pixels_agent_pos' for predvla_libero, got {self.obs_type!r}.")
         self.fault_injection()  # validates fault_rate and fault_mode
         check_placement(self.placement_spread_cm, self.init_states, self.shift().active)
+        self.instructions()  # validates the instruction flags (their range per suite when the envs are made)
         if self.shift().active and not self.init_states:
             raise ValueError("--env.object_shift_cm / --env.target_shift_cm move objects from the official init "
                              "states: they need --env.init_states=true.")
@@ -147,6 +156,10 @@ class PredVLALiberoEnv(LiberoEnv):
         return ShiftSpec(object_cm=self.object_shift_cm, target_cm=self.target_shift_cm,
                          pattern=self.object_shift_pattern, directions=self.object_shift_directions,
                          tolerance_cm=self.shift_tolerance_cm)
+
+    def instructions(self) -> InstructionSource:
+        """Which task's instruction each task is run with (`--env.instruction_from_task`, `--env.instruction_shift`)."""
+        return InstructionSource(from_task=self.instruction_from_task, shift=self.instruction_shift)
 
     def fault_injection(self) -> FaultInjectionStep | None:
         if self.fault_rate == 0.0:

@@ -209,11 +209,23 @@ class SparseRenderLiberoEnv(LiberoEnv):
     to pick (and/or its place target) moved; with `placement_spread_cm` > 0 (`placed_resets`), from a randomised reset
     with every movable object shifted as `predvla demos --placement-spread-cm` shifts them. Either way `shift_records`
     keeps one record per counted episode.
+
+    With `instruction_task`, the policy reads that task's instruction (`task_description`, what lerobot-eval puts into
+    the observation's `task`) while the scene, goal and success check stay this task's (`instructions`);
+    `instruction_record` says which instruction was used.
     """
 
     def __init__(self, *args, render_interval: int = 4, oracle: bool = False, shift: ShiftSpec | None = None,
-                 placement_spread_cm: float = 0.0, **kwargs):
+                 placement_spread_cm: float = 0.0, instruction_task: int | None = None, **kwargs):
         super().__init__(*args, **kwargs)
+        own_instruction = self.task_description
+        if instruction_task is not None:
+            self.task_description = kwargs["task_suite"].get_task(instruction_task).language
+        self.instruction_record = {
+            "task_id": self.task_id, "task": self.task, "own_instruction": own_instruction,
+            "instruction": self.task_description,
+            "instruction_from_task": self.task_id if instruction_task is None else instruction_task,
+        }
         shifting = shift is not None and shift.active
         check_placement(placement_spread_cm, self.init_states, shifting)
         if shifting and not self.init_states:
@@ -388,12 +400,14 @@ def create_envs(cfg, n_envs: int, env_cls) -> dict[str, dict[int, gym.vector.Vec
     camera_names = parse_camera_names(cfg.camera_name)
     kwargs = dict(cfg.gym_kwargs)
     task_ids = kwargs.pop("task_ids", None)
+    instructions = cfg.instructions()
     out: dict[str, dict[int, gym.vector.VectorEnv]] = {}
     for suite_name in [s.strip() for s in str(cfg.task).split(",") if s.strip()]:
         # A LIBERO-PRO or LIBERO-plus variant (`variants`) runs with its base suite's step cap.
         suite, base_name = variant_suite(suite_name) or (_get_suite(suite_name), suite_name)
         out[suite_name] = {}
         for task_id in _select_task_ids(len(suite.tasks), task_ids):
+            instruction_task = instructions.task_for(task_id, len(suite.tasks), suite_name)  # validated before any env
             fns = [
                 partial(
                     SparseRenderLiberoEnv,
@@ -407,6 +421,7 @@ def create_envs(cfg, n_envs: int, env_cls) -> dict[str, dict[int, gym.vector.Vec
                     n_envs=n_envs,
                     control_mode=cfg.control_mode,
                     camera_name_mapping=cfg.camera_name_mapping,
+                    instruction_task=instruction_task if instructions.active else None,
                     **kwargs,
                 )
                 for episode_index in range(n_envs)
