@@ -206,3 +206,52 @@ def test_style_flags_are_checked_and_one_report_holds_one_style(tmp_path):
     teleop = blind_replay.Settings(style="teleop", diversity=0.5).as_dict()
     assert (teleop["style"], teleop["diversity"]) == ("teleop", 0.5)
     assert blind_replay.Settings(diversity=0.5).as_dict() == blind_replay.Settings().as_dict()
+
+
+@pytest.mark.simulator
+def test_replays_on_randomised_resets_name_the_set_and_record_each_reset(tmp_path):
+    """`--resets-seed 3000 --episodes 2 --placement-spread-cm 3`: each plan is replayed on episodes 0 and 1 of
+    lerobot-eval's randomised resets of seed 3000 with the placement spread (where they start is
+    tests/test_placed_resets.py's), still on its own source state too; the settings, the per-episode records,
+    report.json's entries and report.md name the set."""
+    out = tmp_path / "resets"
+    args = ["blind-replay", "--suites", SUITE, "--tasks", str(TASK_ID), "--cap", "20", "--resets-seed", "3000",
+            "--episodes", "2", "--placement-spread-cm", "3", "--out", str(out)]
+    assert predvla_main(args) == 0
+    task = json.loads(blind_replay.task_path(out, SUITE, TASK_ID).read_text())
+    assert task["settings"]["resets"] == {"seed": 3000, "episodes": 2, "placement_spread_cm": 3.0, "settle_steps": 10}
+    assert task["settings"]["states"] == [] and task["settings"]["settle_steps"] == blind_replay.SETTLE_STEPS
+    for plan in task["plans"].values():
+        assert plan["reset_episodes"] == [0, 1] and list(plan["success_step"]) == ["0", "1"]
+        assert plan["episodes"] == 2 and plan["excluded_states"] == [] and "states" not in plan
+        assert [plan["resets"][e]["seed"] for e in ("0", "1")] == [3000, 3001]
+        assert all(len(plan["resets"][e]["offsets_m"]) == 7 for e in ("0", "1"))  # every movable object shifted
+        assert plan["source_replay_step"] is None and plan["source_steps"] == 20  # the 20-step cap: no success
+    entry = json.loads((out / blind_replay.REPORT_JSON).read_text())[SUITE][str(TASK_ID)]
+    assert (entry["starts"], entry["resets_seed"], entry["placement_spread_cm"]) == ("resets", 3000, 3.0)
+    assert entry["style"] == "scripted" and entry["reset_episodes"] == [0, 1]
+    text = (out / blind_replay.REPORT_MD).read_text()
+    assert "--seed=3000 --env.placement_spread_cm=3` (reset seeds 3000-3001)" in text
+    assert "--resets-seed 3000 --episodes 2 --placement-spread-cm 3" in text
+
+
+def test_reset_flags_are_checked_and_each_set_has_its_own_default_folder(tmp_path):
+    for flags, message in [(["--episodes", "3"], "--episodes 3 needs --resets-seed"),
+                           (["--placement-spread-cm", "3"], "--placement-spread-cm .* needs --resets-seed"),
+                           (["--resets-seed", "3000", "--states", "1-3"], "pass one or the other"),
+                           (["--resets-seed", "3000", "--episodes", "0"], "--episodes must be >= 1"),
+                           (["--resets-seed", "3000", "--object-shift-cm", "4"], "use one or the other"),
+                           (["--cross-task", "--resets-seed", "3000"], "--resets-seed .* not supported")]:
+        with pytest.raises(SystemExit, match=message):
+            predvla_main(["blind-replay", *flags, "--out", str(tmp_path)])
+    official = blind_replay.task_path(tmp_path, SUITE, 3)
+    atomic_write_json(official, {"settings": blind_replay.Settings().as_dict()})
+    with pytest.raises(SystemExit, match="on other starts"):
+        predvla_main(["blind-replay", "--suites", SUITE, "--tasks", "0", "--resets-seed", "3000", "--out",
+                      str(tmp_path)])
+    spec = blind_replay.ResetSpec
+    assert blind_replay.default_out("scripted", spec()) == blind_replay.DEFAULT_OUT
+    assert str(blind_replay.default_out("teleop", spec())) == "results/blind_replay_teleop"
+    assert str(blind_replay.default_out("scripted", spec(seed=3000))) == "results/blind_replay_resets3000"
+    assert (str(blind_replay.default_out("teleop", spec(seed=3000, placement_spread_cm=3.0)))
+            == "results/blind_replay_resets3000_placed3cm_teleop")

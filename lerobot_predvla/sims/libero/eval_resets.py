@@ -8,7 +8,7 @@ the arm's start noise from that generator; the evaluation env's ControlEnv has n
 `env.make_env` without `init_noise`), then with `--env.placement_spread_cm=S` shifts every movable object
 (`placed_resets.PlacedResets.place`, `placement.episode_shift`), then takes `EVAL_SETTLE_STEPS` idle steps.
 `eval_start` does the same on a ControlEnv from `env.make_env`, with the same functions, so the simulator is in the
-same state when the episode's first action comes (tests/test_blind_replay_resets.py compares the two).
+same state when the episode's first action comes (tests/test_placed_resets.py compares the two).
 """
 
 from dataclasses import asdict, dataclass
