@@ -145,18 +145,21 @@ def test_headline_reference_row_comes_from_the_blind_replay_report(tmp_path):
 
 @pytest.mark.simulator
 def test_replays_under_a_shift_record_each_states_shift_and_settling(tmp_path):
-    """`--object-shift-cm`: the replay on official init state 1 starts with the object moved as lerobot-eval's episode
-    1 would (cross: -x), and the task's file says where it went and that it settled; the settings name the shift."""
+    """`--object-shift-cm`: the replays on official init states 0 and 1 start with the object moved as lerobot-eval's
+    episodes 0 and 1 would (cross: +x, -x), and the task's file says where it went and that it settled; the settings
+    name the shift. State 0, the state-0 plan's source, is a replay of its own once shifted."""
     out = tmp_path / "shifted"
-    args = ["blind-replay", "--suites", SUITE, "--tasks", str(TASK_ID), "--states", "1", "--cap", str(CAP),
+    args = ["blind-replay", "--suites", SUITE, "--tasks", str(TASK_ID), "--states", "0,1", "--cap", str(CAP),
             "--object-shift-cm", "4", "--object-shift-pattern", "cross", "--out", str(out)]
     assert predvla_main(args) == 0
     task = json.loads(blind_replay.task_path(out, SUITE, TASK_ID).read_text())
     assert task["settings"]["shift"]["object_cm"] == 4 and task["settings"]["shift"]["pattern"] == "cross"
-    shift = task["plans"]["state0"]["shifts"]["1"]
-    (body,) = shift["bodies"]
-    assert body["name"] == "alphabet_soup_1" and body["direction_deg"] == 180 and body["offset_m"] == [-0.04, 0.0]
-    assert shift["settled"] and task["plans"]["state0"]["episodes"] == 1
+    plan = task["plans"]["state0"]
+    for state, direction, offset in (("0", 0, [0.04, 0.0]), ("1", 180, [-0.04, 0.0])):
+        (body,) = plan["shifts"][state]["bodies"]
+        assert body["name"] == "alphabet_soup_1" and body["direction_deg"] == direction and body["offset_m"] == offset
+        assert plan["shifts"][state]["settled"]
+    assert plan["states"] == [0, 1] and plan["episodes"] == 2 and plan["excluded_states"] == []
 
 
 def test_unshifted_settings_keep_the_form_the_committed_results_were_recorded_with():
@@ -190,6 +193,15 @@ def test_teleop_style_replays_the_teleoperator_models_demonstration_and_names_it
     assert "--style teleop --diversity 1" in (out / blind_replay.REPORT_MD).read_text()
     scripted_entry = json.loads((tiny_run[0] / blind_replay.REPORT_JSON).read_text())[SUITE][str(TASK_ID)]
     assert scripted_entry["style"] == "scripted" and "diversity" not in scripted_entry
+
+
+def test_a_plans_own_source_is_a_replay_state_only_when_shifted():
+    plain = blind_replay.Settings(states=(0, 1, 2))
+    shifted = blind_replay.Settings(states=(0, 1, 2), shift=blind_replay.ShiftSpec(object_cm=4))
+    assert plain.replay_episodes(0) == [1, 2] and plain.excluded(0) == [0] and plain.excluded(5) == []
+    assert shifted.replay_episodes(0) == [0, 1, 2] and shifted.excluded(0) == []
+    on_resets = blind_replay.Settings(states=(), resets=blind_replay.ResetSpec(seed=3000, episodes=3))
+    assert on_resets.replay_episodes(0) == [0, 1, 2] and on_resets.excluded(0) == []
 
 
 def test_style_flags_are_checked_and_one_report_holds_one_style(tmp_path):
@@ -250,8 +262,8 @@ def test_reset_flags_are_checked_and_each_set_has_its_own_default_folder(tmp_pat
         predvla_main(["blind-replay", "--suites", SUITE, "--tasks", "0", "--resets-seed", "3000", "--out",
                       str(tmp_path)])
     spec = blind_replay.ResetSpec
-    assert blind_replay.default_out("scripted", spec()) == blind_replay.DEFAULT_OUT
-    assert str(blind_replay.default_out("teleop", spec())) == "results/blind_replay_teleop"
-    assert str(blind_replay.default_out("scripted", spec(seed=3000))) == "results/blind_replay_resets3000"
-    assert (str(blind_replay.default_out("teleop", spec(seed=3000, placement_spread_cm=3.0)))
+    assert blind_replay.default_folder("scripted", spec()) == blind_replay.DEFAULT_OUT
+    assert str(blind_replay.default_folder("teleop", spec())) == "results/blind_replay_teleop"
+    assert str(blind_replay.default_folder("scripted", spec(seed=3000))) == "results/blind_replay_resets3000"
+    assert (str(blind_replay.default_folder("teleop", spec(seed=3000, placement_spread_cm=3.0)))
             == "results/blind_replay_resets3000_placed3cm_teleop")

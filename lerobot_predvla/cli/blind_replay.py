@@ -53,7 +53,7 @@ from lerobot_predvla.sims.libero.blind_replay import (
     DEFAULT_STATES,
     TASKS_DIR,
     Settings,
-    default_out,
+    default_folder,
     episodes_per_task,
     load_task,
     run_task,
@@ -189,15 +189,15 @@ def command_line(args: argparse.Namespace) -> str:
             words.insert(3, ",".join(map(str, args.cross_task)))
         if args.own_out != DEFAULT_OUT:
             words += ["--own-out", str(args.own_out)]
-    if args.out != out_default(args):
+    if args.out != default_out(args):
         words += ["--out", str(args.out)]
     return shlex.join(words)
 
 
-def out_default(args: argparse.Namespace) -> Path:
+def default_out(args: argparse.Namespace) -> Path:
     if args.cross_task is not None:
         return DEFAULT_CROSS_OUT
-    return default_out(args.style, resets(args))
+    return default_folder(args.style, resets(args))
 
 
 def resets(args: argparse.Namespace) -> ResetSpec:
@@ -238,9 +238,10 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"--cap must be >= 1, got {args.cap}")
     if args.source_state < 0:
         raise SystemExit(f"--source-state must be >= 0, got {args.source_state}")
-    if args.source_state in states:
+    if args.source_state in states and not args.object_shift_cm:
         raise SystemExit(f"--states {','.join(map(str, states))} includes --source-state {args.source_state}: the "
-                         "state-0 plan is replayed on states other than its own")
+                         "state-0 plan is replayed on states other than its own (unless --object-shift-cm moves the "
+                         "object from it)")
     try:
         shift = ShiftSpec(object_cm=args.object_shift_cm, pattern=args.object_shift_pattern,
                           directions=args.object_shift_directions)
@@ -255,7 +256,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         raise SystemExit(str(err)) from err
     if args.out is None:
-        args.out = out_default(args)
+        args.out = default_out(args)
     if args.cross_task is not None:
         if args.object_shift_cm or args.style != DEFAULT_STYLE or settings.resets.active:
             raise SystemExit("--cross-task replays scripted plans on other tasks' official states; --object-shift-cm, "

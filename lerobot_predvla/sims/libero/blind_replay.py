@@ -20,9 +20,10 @@ with, seeded by the source episode's seed, `seed + source`): the same plan, exec
 idle stretches, overshoots and regrasps.
 
 Each plan is also replayed on its own source state: it must reproduce the expert's success there (a check that the
-replay is exact). With `Settings.shift` (`predvla blind-replay --object-shift-cm`), the replays on the other states
+replay is exact). With `Settings.shift` (`predvla blind-replay --object-shift-cm`), the replays on the replay states
 start with the object to pick shifted as `predvla_libero --env.object_shift_cm` shifts it in episode k on official
-init state k (`object_shift`), and each task's file records per state how the shifted object settled (`shifts`).
+init state k (`object_shift`), and each task's file records per state how the shifted object settled (`shifts`);
+a plan's own source state may then be one of them (shifted, it is another start).
 Fixture poses (which resets jitter outside the simulator state) are drawn from numpy's generator
 seeded with `seed + state` before every reset, so a given state starts alike whichever plan runs on it.
 
@@ -102,10 +103,15 @@ class Settings:
 
     def replay_episodes(self, source: int) -> list[int]:
         """The replays of the plan from official init state `source`: the indices of the randomised-reset episodes,
-        or the official init states `states` less `source`."""
+        or the official init states `states` less `source` (`excluded`)."""
         if self.resets.active:
             return list(range(self.resets.episodes))
-        return [s for s in self.states if s != source]
+        return [s for s in self.states if s not in self.excluded(source)]
+
+    def excluded(self, source: int) -> list[int]:
+        """`source` if it is one of `states` and its start is the plan's own (not shifted): that replay is the
+        own-start check, not counted."""
+        return [s for s in self.states if s == source and not self.shift.active]
 
 
 def style_of(settings: dict) -> dict:
@@ -123,7 +129,7 @@ def starts_of(settings: dict) -> dict:
     return {"starts": "resets", "resets_seed": resets["seed"], "placement_spread_cm": resets["placement_spread_cm"]}
 
 
-def default_out(style: str, resets: ResetSpec) -> Path:
+def default_folder(style: str, resets: ResetSpec) -> Path:
     """The output folder of a report of this style on these starts unless `--out` says: one per style and set of
     starts, e.g. results/blind_replay (scripted, official init states) or
     results/blind_replay_resets3000_placed3cm_teleop (teleop, `--resets-seed 3000 --placement-spread-cm 3`)."""
@@ -237,7 +243,7 @@ def plan_replays(env, init_states: np.ndarray, source: int, settings: Settings, 
     return {
         "source_state": source, "source_success": plan["success"], "source_steps": plan["steps"],
         "source_note": plan["note"], "source_replay_step": own,
-        "excluded_states": [s for s in settings.states if s == source],
+        "excluded_states": settings.excluded(source),
         **starts, "success_step": outcomes,
         "successes": sum(v is not None for v in outcomes.values()), "episodes": len(outcomes),
         "plan": plan["actions"].round(6).tolist(),
