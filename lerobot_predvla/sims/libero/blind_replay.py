@@ -197,12 +197,12 @@ def replay(env, init_state: np.ndarray, actions: np.ndarray, seed: int, settings
     return _play(env, actions, settings)
 
 
-def start(env, init_states: np.ndarray, episode: int, settings: Settings) -> dict | None:
+def start(env, init_states: np.ndarray | None, episode: int, settings: Settings) -> dict | None:
     """Put `env` where replay episode `episode` starts, its settle steps taken: with `settings.resets`, lerobot-eval's
-    randomised reset of episode `episode` (`eval_start`); else official init state `episode` (fixture poses seeded with
-    `settings.seed + episode`), with `settings.shift` moved as lerobot-eval's episode `episode` on it (`object_shift`).
-    The start's record (reset seed and placement shift, or how the shifted object settled), or None (official, not
-    shifted)."""
+    randomised reset of episode `episode` (`eval_start`; `init_states` unused); else official init state `episode` of
+    `init_states` (fixture poses seeded with `settings.seed + episode`), with `settings.shift` moved as lerobot-eval's
+    episode `episode` on it (`object_shift`). The start's record (reset seed and placement shift, or how the shifted
+    object settled), or None (official, not shifted)."""
     if settings.resets.active:
         return eval_start(env, settings.resets.reset_seed(episode), settings.resets.placement_spread_cm)
     if not settings.shift.active:
@@ -364,7 +364,7 @@ def starts_words(entry: dict) -> str:
 def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
     entry = next(iter(next(iter(report.values())).values()))
     if entry.get("starts", "official") == "official":
-        where = "other official init states: `set_init_state`"
+        where = "other official init states: `set_init_state`,"
     else:
         where = ("the randomised resets `predvla_libero` starts `lerobot-eval --env.init_states=false` episodes from "
                  "(the same reset seeds, placement shifts and arm start), then")
