@@ -145,18 +145,21 @@ def test_headline_reference_row_comes_from_the_blind_replay_report(tmp_path):
 
 @pytest.mark.simulator
 def test_replays_under_a_shift_record_each_states_shift_and_settling(tmp_path):
-    """`--object-shift-cm`: the replay on official init state 1 starts with the object moved as lerobot-eval's episode
-    1 would (cross: -x), and the task's file says where it went and that it settled; the settings name the shift."""
+    """`--object-shift-cm`: the replays on official init states 0 and 1 start with the object moved as lerobot-eval's
+    episodes 0 and 1 would (cross: +x, -x), and the task's file says where it went and that it settled; the settings
+    name the shift. State 0, the state-0 plan's source, is a replay of its own once shifted."""
     out = tmp_path / "shifted"
-    args = ["blind-replay", "--suites", SUITE, "--tasks", str(TASK_ID), "--states", "1", "--cap", str(CAP),
+    args = ["blind-replay", "--suites", SUITE, "--tasks", str(TASK_ID), "--states", "0,1", "--cap", str(CAP),
             "--object-shift-cm", "4", "--object-shift-pattern", "cross", "--out", str(out)]
     assert predvla_main(args) == 0
     task = json.loads(blind_replay.task_path(out, SUITE, TASK_ID).read_text())
     assert task["settings"]["shift"]["object_cm"] == 4 and task["settings"]["shift"]["pattern"] == "cross"
-    shift = task["plans"]["state0"]["shifts"]["1"]
-    (body,) = shift["bodies"]
-    assert body["name"] == "alphabet_soup_1" and body["direction_deg"] == 180 and body["offset_m"] == [-0.04, 0.0]
-    assert shift["settled"] and task["plans"]["state0"]["episodes"] == 1
+    plan = task["plans"]["state0"]
+    for state, direction, offset in (("0", 0, [0.04, 0.0]), ("1", 180, [-0.04, 0.0])):
+        (body,) = plan["shifts"][state]["bodies"]
+        assert body["name"] == "alphabet_soup_1" and body["direction_deg"] == direction and body["offset_m"] == offset
+        assert plan["shifts"][state]["settled"]
+    assert plan["states"] == [0, 1] and plan["episodes"] == 2 and plan["excluded_states"] == []
 
 
 def test_unshifted_settings_keep_the_form_the_committed_results_were_recorded_with():
@@ -192,6 +195,15 @@ def test_teleop_style_replays_the_teleoperator_models_demonstration_and_names_it
     assert scripted_entry["style"] == "scripted" and "diversity" not in scripted_entry
 
 
+def test_a_plans_own_source_is_a_replay_state_only_when_shifted():
+    plain = blind_replay.Settings(states=(0, 1, 2))
+    shifted = blind_replay.Settings(states=(0, 1, 2), shift=blind_replay.ShiftSpec(object_cm=4))
+    assert plain.replay_episodes(0) == [1, 2] and plain.excluded(0) == [0] and plain.excluded(5) == []
+    assert shifted.replay_episodes(0) == [0, 1, 2] and shifted.excluded(0) == []
+    on_resets = blind_replay.Settings(states=(), resets=blind_replay.ResetSpec(seed=3000, episodes=3))
+    assert on_resets.replay_episodes(0) == [0, 1, 2] and on_resets.excluded(0) == []
+
+
 def test_style_flags_are_checked_and_one_report_holds_one_style(tmp_path):
     with pytest.raises(SystemExit, match="--diversity 0.5 needs --style teleop"):
         predvla_main(["blind-replay", "--diversity", "0.5", "--out", str(tmp_path)])
@@ -206,3 +218,52 @@ def test_style_flags_are_checked_and_one_report_holds_one_style(tmp_path):
     teleop = blind_replay.Settings(style="teleop", diversity=0.5).as_dict()
     assert (teleop["style"], teleop["diversity"]) == ("teleop", 0.5)
     assert blind_replay.Settings(diversity=0.5).as_dict() == blind_replay.Settings().as_dict()
+
+
+@pytest.mark.simulator
+def test_replays_on_randomised_resets_name_the_set_and_record_each_reset(tmp_path):
+    """`--resets-seed 3000 --episodes 2 --placement-spread-cm 3`: each plan is replayed on episodes 0 and 1 of
+    lerobot-eval's randomised resets of seed 3000 with the placement spread (where they start is
+    tests/test_placed_resets.py's), still on its own source state too; the settings, the per-episode records,
+    report.json's entries and report.md name the set."""
+    out = tmp_path / "resets"
+    args = ["blind-replay", "--suites", SUITE, "--tasks", str(TASK_ID), "--cap", "20", "--resets-seed", "3000",
+            "--episodes", "2", "--placement-spread-cm", "3", "--out", str(out)]
+    assert predvla_main(args) == 0
+    task = json.loads(blind_replay.task_path(out, SUITE, TASK_ID).read_text())
+    assert task["settings"]["resets"] == {"seed": 3000, "episodes": 2, "placement_spread_cm": 3.0, "settle_steps": 10}
+    assert task["settings"]["states"] == [] and task["settings"]["settle_steps"] == blind_replay.SETTLE_STEPS
+    for plan in task["plans"].values():
+        assert plan["reset_episodes"] == [0, 1] and list(plan["success_step"]) == ["0", "1"]
+        assert plan["episodes"] == 2 and plan["excluded_states"] == [] and "states" not in plan
+        assert [plan["resets"][e]["seed"] for e in ("0", "1")] == [3000, 3001]
+        assert all(len(plan["resets"][e]["offsets_m"]) == 7 for e in ("0", "1"))  # every movable object shifted
+        assert plan["source_replay_step"] is None and plan["source_steps"] == 20  # the 20-step cap: no success
+    entry = json.loads((out / blind_replay.REPORT_JSON).read_text())[SUITE][str(TASK_ID)]
+    assert (entry["starts"], entry["resets_seed"], entry["placement_spread_cm"]) == ("resets", 3000, 3.0)
+    assert entry["style"] == "scripted" and entry["reset_episodes"] == [0, 1]
+    text = (out / blind_replay.REPORT_MD).read_text()
+    assert "--seed=3000 --env.placement_spread_cm=3` (reset seeds 3000-3001)" in text
+    assert "--resets-seed 3000 --episodes 2 --placement-spread-cm 3" in text
+
+
+def test_reset_flags_are_checked_and_each_set_has_its_own_default_folder(tmp_path):
+    for flags, message in [(["--episodes", "3"], "--episodes 3 needs --resets-seed"),
+                           (["--placement-spread-cm", "3"], "--placement-spread-cm .* needs --resets-seed"),
+                           (["--resets-seed", "3000", "--states", "1-3"], "pass one or the other"),
+                           (["--resets-seed", "3000", "--episodes", "0"], "--episodes must be >= 1"),
+                           (["--resets-seed", "3000", "--object-shift-cm", "4"], "use one or the other"),
+                           (["--cross-task", "--resets-seed", "3000"], "--resets-seed .* not supported")]:
+        with pytest.raises(SystemExit, match=message):
+            predvla_main(["blind-replay", *flags, "--out", str(tmp_path)])
+    official = blind_replay.task_path(tmp_path, SUITE, 3)
+    atomic_write_json(official, {"settings": blind_replay.Settings().as_dict()})
+    with pytest.raises(SystemExit, match="on other starts"):
+        predvla_main(["blind-replay", "--suites", SUITE, "--tasks", "0", "--resets-seed", "3000", "--out",
+                      str(tmp_path)])
+    spec = blind_replay.ResetSpec
+    assert blind_replay.default_folder("scripted", spec()) == blind_replay.DEFAULT_OUT
+    assert str(blind_replay.default_folder("teleop", spec())) == "results/blind_replay_teleop"
+    assert str(blind_replay.default_folder("scripted", spec(seed=3000))) == "results/blind_replay_resets3000"
+    assert (str(blind_replay.default_folder("teleop", spec(seed=3000, placement_spread_cm=3.0)))
+            == "results/blind_replay_resets3000_placed3cm_teleop")

@@ -1,6 +1,7 @@
 """Varied placements at evaluation (`--env.placement_spread_cm`): lerobot-eval's episodes start where `predvla demos
 --placement-spread-cm` demonstrations of the same seeds start. The option's checks run without the simulator; the
-simulator tests reset real environments as lerobot-eval does and set them beside the demonstrations' starts."""
+simulator tests reset real environments as lerobot-eval does and set them beside the demonstrations' starts and the
+blind replay's (`predvla blind-replay --resets-seed`)."""
 
 import json
 import subprocess
@@ -126,3 +127,42 @@ def test_lerobot_eval_seeds_episode_i_with_seed_plus_i_across_batches(tmp_path):
     for episode in shifts["episodes"]:
         offsets, _ = _demonstration_start(episode["seed"], SPREAD_CM, init_noise=0.0)
         np.testing.assert_allclose(list(episode["offsets_m"].values()), list(offsets.values()), atol=1e-6)
+
+
+@pytest.mark.simulator
+@pytest.mark.parametrize("spread_cm", [0.0, SPREAD_CM])
+def test_blind_replay_on_resets_starts_where_the_evaluation_env_starts(spread_cm):
+    """`predvla blind-replay --resets-seed SEED [--placement-spread-cm 3]`: episode i of its replays starts from the
+    simulator state (after the settle steps) in which lerobot-eval's episode i of the same seed starts, on one env that
+    has run an official start and a few steps before (as it has recorded a plan), with the evaluation's placement
+    record."""
+    from lerobot_predvla.sims.libero import blind_replay
+    from lerobot_predvla.sims.libero.env import make_env, official_init_states, task_spec
+    from lerobot_predvla.sims.libero.eval_resets import ResetSpec
+    from lerobot_predvla.sims.libero.rollout import IDLE
+
+    venv, _, _ = _reset(spread_cm, 2)
+    try:
+        expected = [env._env.get_sim_state() for env in venv.envs]
+        records = [r for env in venv.envs for r in env.shift_records]
+    finally:
+        venv.close()
+    settings = blind_replay.Settings(states=(), resets=ResetSpec(seed=SEED, episodes=2, placement_spread_cm=spread_cm))
+    env = make_env(task_spec(SUITE, TASK_ID))
+    try:
+        env.reset()
+        env.set_init_state(official_init_states(SUITE, TASK_ID)[0])
+        for _ in range(3):
+            env.step(IDLE + 0.5)
+        for episode, state in enumerate(expected):
+            record = blind_replay.start(env, None, episode, settings)
+            np.testing.assert_allclose(env.get_sim_state(), state, rtol=0, atol=1e-9)
+            assert record["seed"] == SEED + episode
+            if spread_cm:
+                assert record["offsets_m"] == records[episode]["offsets_m"] and record["settled"]
+                assert record["placed_xy_m"] == records[episode]["placed_xy_m"]
+            else:
+                assert set(record) == {"seed"} and records == []
+        assert not np.allclose(expected[0], expected[1])  # two seeds, two starts
+    finally:
+        env.close()

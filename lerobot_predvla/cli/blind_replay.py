@@ -17,6 +17,15 @@ default OUT: results/blind_replay_teleop.
 
   predvla blind-replay --suites libero_object --tasks 0 --states 1-19 --style teleop
 
+`--resets-seed S --episodes N [--placement-spread-cm P]`: the plans (still recorded from official init states) are
+replayed on randomised resets instead of official init states: episode i starts exactly where `lerobot-eval
+--env.type=predvla_libero --env.init_states=false --seed=S [--env.placement_spread_cm=P]` starts episode i of the
+task (reset seed S + i, the same placement shift, no arm start noise, LeRobot's 10 settle steps). Each per-task file
+records every episode's reset seed (and placement record); report.json's entries name the set. Default OUT:
+results/blind_replay_resetsS[_placedPcm][_teleop].
+
+  predvla blind-replay --suites libero_object --tasks 2,3,6 --resets-seed 3000 --episodes 10 --placement-spread-cm 3
+
 `--cross-task`: what ignoring the instruction gets. The state-0 plan of each task in `--tasks` (the plan tasks) is
 replayed on the official init states `--states` of every other task of the same scene (or of the evaluated tasks
 listed after the flag), success judged by the evaluated task's goal. Only tasks that share one scene are paired
@@ -42,12 +51,13 @@ from lerobot_predvla.columns import SUITES
 from lerobot_predvla.sims.libero.blind_replay import (
     DEFAULT_OUT,
     DEFAULT_STATES,
-    DEFAULT_TELEOP_OUT,
     TASKS_DIR,
     Settings,
+    default_folder,
     episodes_per_task,
     load_task,
     run_task,
+    starts_of,
     style_of,
     task_path,
     write_report,
@@ -60,6 +70,7 @@ from lerobot_predvla.sims.libero.blind_replay_cross import (
 )
 from lerobot_predvla.sims.libero.cross_task_report import write_cross_report
 from lerobot_predvla.sims.libero.env import num_tasks
+from lerobot_predvla.sims.libero.eval_resets import ResetSpec
 from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
 from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE, STYLES
 from lerobot_predvla.sims.libero.object_shift import PATTERNS, ShiftSpec
@@ -129,14 +140,23 @@ def add_parser(subparsers) -> None:
     p.add_argument("--diversity", type=float, default=None,
                    help="with --style teleop: the teleoperator model's diversity (default 1, the committed setting; "
                         "0: the script's actions exactly)")
+    p.add_argument("--resets-seed", type=int, default=None,
+                   help="replay on randomised resets instead of official init states: episode i starts as lerobot-eval "
+                        "--env.type=predvla_libero --env.init_states=false --seed=RESETS_SEED starts episode i")
+    p.add_argument("--episodes", type=int, default=None,
+                   help="with --resets-seed: episodes per task, with reset seeds RESETS_SEED + 0 ... EPISODES - 1 "
+                        "(default 10)")
+    p.add_argument("--placement-spread-cm", type=float, default=0.0,
+                   help="with --resets-seed: shift every movable object after each reset as lerobot-eval's "
+                        "--env.placement_spread_cm does (default 0: none)")
     p.add_argument("--cross-task", type=_ints("--cross-task"), nargs="?", const=ALL_OTHERS, default=None,
                    metavar="IDS", help="replay each plan on other tasks of the same scene instead of its own: on the "
                    "evaluated task ids IDS, or with no IDS on every other task of the suite")
     p.add_argument("--own-out", type=Path, default=DEFAULT_OUT,
                    help=f"with --cross-task: the own-task results the report sets beside (default {DEFAULT_OUT})")
     p.add_argument("--out", type=Path, default=None,
-                   help=f"output folder (default {DEFAULT_OUT}, with --style teleop {DEFAULT_TELEOP_OUT}, with "
-                        f"--cross-task {DEFAULT_CROSS_OUT})")
+                   help=f"output folder (default {DEFAULT_OUT}[_resetsS[_placedPcm]][_teleop] by --resets-seed, "
+                        f"--placement-spread-cm and --style; with --cross-task {DEFAULT_CROSS_OUT})")
     p.set_defaults(func=run)
 
 
@@ -156,6 +176,10 @@ def command_line(args: argparse.Namespace) -> str:
         words += ["--seed", str(args.seed)]
     if args.style != DEFAULT_STYLE:
         words += ["--style", args.style, "--diversity", f"{diversity(args):g}"]
+    if args.resets_seed is not None:
+        words += ["--resets-seed", str(args.resets_seed), "--episodes", str(resets(args).episodes)]
+        if args.placement_spread_cm:
+            words += ["--placement-spread-cm", f"{args.placement_spread_cm:g}"]
     if args.object_shift_cm:
         words += ["--object-shift-cm", f"{args.object_shift_cm:g}", "--object-shift-pattern", args.object_shift_pattern,
                   "--object-shift-directions", str(args.object_shift_directions)]
@@ -173,7 +197,15 @@ def command_line(args: argparse.Namespace) -> str:
 def default_out(args: argparse.Namespace) -> Path:
     if args.cross_task is not None:
         return DEFAULT_CROSS_OUT
-    return DEFAULT_TELEOP_OUT if args.style != DEFAULT_STYLE else DEFAULT_OUT
+    return default_folder(args.style, resets(args))
+
+
+def resets(args: argparse.Namespace) -> ResetSpec:
+    """--resets-seed, --episodes (10 when not given) and --placement-spread-cm; ValueError naming the flags."""
+    if args.resets_seed is None and args.episodes is not None:
+        raise ValueError(f"--episodes {args.episodes} needs --resets-seed (on official init states: --states)")
+    return ResetSpec(seed=args.resets_seed, episodes=10 if args.episodes is None else args.episodes,
+                     placement_spread_cm=args.placement_spread_cm)
 
 
 def diversity(args: argparse.Namespace) -> float:
@@ -181,26 +213,35 @@ def diversity(args: argparse.Namespace) -> float:
     return 1.0 if args.diversity is None else args.diversity
 
 
-def other_style(out: Path, suites: list[str], settings: Settings) -> Path | None:
-    """A per-task file under `out` made with another style or diversity than `settings` (one report holds one)."""
-    mine = style_of(settings.as_dict())
+def kind_of(settings: dict) -> dict:
+    """What one report holds one of: the plans' style (and diversity) and the set of starts (`starts_of`)."""
+    return {**style_of(settings), **starts_of(settings)}
+
+
+def other_kind(out: Path, suites: list[str], settings: Settings) -> Path | None:
+    """A per-task file under `out` made with another style, diversity or set of starts than `settings`."""
+    mine = kind_of(settings.as_dict())
     for suite in suites:
         for path in sorted((Path(out) / TASKS_DIR / suite).glob("task*.json")):
             done = load_task(path)
-            if done is not None and style_of(done.get("settings", {})) != mine:
+            if done is not None and kind_of(done.get("settings", {})) != mine:
                 return path
     return None
 
 
 def run(args: argparse.Namespace) -> int:
-    states = tuple(args.states) if args.states is not None else DEFAULT_STATES
+    if args.resets_seed is not None and args.states is not None:
+        raise SystemExit("--states lists official init states to replay on; --resets-seed replays on randomised "
+                         "resets instead (--episodes): pass one or the other")
+    states = tuple(args.states) if args.states is not None else () if args.resets_seed is not None else DEFAULT_STATES
     if args.cap < 1:
         raise SystemExit(f"--cap must be >= 1, got {args.cap}")
     if args.source_state < 0:
         raise SystemExit(f"--source-state must be >= 0, got {args.source_state}")
-    if args.source_state in states:
+    if args.source_state in states and not args.object_shift_cm:
         raise SystemExit(f"--states {','.join(map(str, states))} includes --source-state {args.source_state}: the "
-                         "state-0 plan is replayed on states other than its own")
+                         "state-0 plan is replayed on states other than its own (unless --object-shift-cm moves the "
+                         "object from it)")
     try:
         shift = ShiftSpec(object_cm=args.object_shift_cm, pattern=args.object_shift_pattern,
                           directions=args.object_shift_directions)
@@ -210,20 +251,22 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"--diversity {args.diversity} needs --style teleop (the script has no diversity)")
     try:
         settings = Settings(states=states, source_state=args.source_state, cap=args.cap, seed=args.seed,
-                            half_turn=args.half_turn, shift=shift, style=args.style, diversity=diversity(args))
+                            half_turn=args.half_turn, shift=shift, style=args.style, diversity=diversity(args),
+                            resets=resets(args))
     except ValueError as err:
         raise SystemExit(str(err)) from err
     if args.out is None:
         args.out = default_out(args)
     if args.cross_task is not None:
-        if args.object_shift_cm or args.style != DEFAULT_STYLE:
-            raise SystemExit("--cross-task replays scripted plans on other tasks' official states; --object-shift-cm "
-                             "and --style teleop are not supported with it")
+        if args.object_shift_cm or args.style != DEFAULT_STYLE or settings.resets.active:
+            raise SystemExit("--cross-task replays scripted plans on other tasks' official states; --object-shift-cm, "
+                             "--resets-seed and --style teleop are not supported with it")
         return run_cross(args, settings)
-    mixed = other_style(args.out, args.suites, settings)
+    mixed = other_kind(args.out, args.suites, settings)
     if mixed is not None:
-        raise SystemExit(f"{mixed} holds plans of another style ({style_of(load_task(mixed)['settings'])}); one "
-                         "report holds one style: pass another --out")
+        raise SystemExit(f"{mixed} holds plans of another style or on other starts "
+                         f"({kind_of(load_task(mixed)['settings'])}); one report holds one style on one set of "
+                         "starts: pass another --out")
     expected = {suite: num_tasks(suite) for suite in args.suites}
     jobs = []
     for suite in args.suites:

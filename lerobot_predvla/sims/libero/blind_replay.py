@@ -20,11 +20,20 @@ with, seeded by the source episode's seed, `seed + source`): the same plan, exec
 idle stretches, overshoots and regrasps.
 
 Each plan is also replayed on its own source state: it must reproduce the expert's success there (a check that the
-replay is exact). With `Settings.shift` (`predvla blind-replay --object-shift-cm`), the replays on the other states
+replay is exact). With `Settings.shift` (`predvla blind-replay --object-shift-cm`), the replays on the replay states
 start with the object to pick shifted as `predvla_libero --env.object_shift_cm` shifts it in episode k on official
-init state k (`object_shift`), and each task's file records per state how the shifted object settled (`shifts`).
+init state k (`object_shift`), and each task's file records per state how the shifted object settled (`shifts`);
+a plan's own source state may then be one of them (shifted, it is another start).
 Fixture poses (which resets jitter outside the simulator state) are drawn from numpy's generator
 seeded with `seed + state` before every reset, so a given state starts alike whichever plan runs on it.
+
+With `Settings.resets` (`predvla blind-replay --resets-seed s --episodes n [--placement-spread-cm S]`) the plans are
+replayed on randomised resets instead of official init states: episode i starts where `lerobot-eval
+--env.type=predvla_libero --env.init_states=false --seed=s [--env.placement_spread_cm=S]` starts episode i of the task
+(`eval_resets.eval_start`: reset seed s + i, the evaluation's placement shift, its 10 settle steps), and each task's
+file records per episode its reset seed and, with a spread, the evaluation's placement record (`resets`). The plans
+are still recorded from official init states, and still replayed on their own source state (with the recording's
+settle steps, `settle_steps`).
 """
 
 import json
@@ -36,6 +45,7 @@ import numpy as np
 
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.sims.libero.env import make_env, official_init_states, task_spec
+from lerobot_predvla.sims.libero.eval_resets import ResetSpec, eval_start
 from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE, STYLES, TELEOP, TeleopParams
 from lerobot_predvla.sims.libero.object_shift import ShiftedResets, ShiftSpec
 from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH, SUITE_LABELS
@@ -48,7 +58,6 @@ NEAREST_MEAN_KEY = "nearest_mean_plan"  # report.json: the second plan's numbers
 REPORT_JSON, REPORT_MD, FIGURE = "report.json", "report.md", "blind_replay.png"
 TASKS_DIR = "tasks"
 DEFAULT_OUT = Path("results/blind_replay")
-DEFAULT_TELEOP_OUT = Path("results/blind_replay_teleop")  # `--style teleop`: its own report beside the scripted one
 DEFAULT_STATES = tuple(range(1, 21))
 
 
@@ -65,12 +74,19 @@ class Settings:
     shift: ShiftSpec = ShiftSpec()  # the object to pick moved on the replay states (`object_shift`)
     style: str = DEFAULT_STYLE  # who executes the plan: the script, or the teleoperator model (`expert.teleop`)
     diversity: float = 1.0  # the teleoperator model's diversity (`TeleopParams.at`); the script has none
+    resets: ResetSpec = ResetSpec()  # replay on lerobot-eval's randomised resets instead of `states` (`eval_resets`)
 
     def __post_init__(self) -> None:
         if self.style not in STYLES:
             raise ValueError(f"--style must be one of {STYLES}, got {self.style!r}")
         if not self.diversity >= 0:
             raise ValueError(f"--diversity must be >= 0, got {self.diversity}")
+        if self.resets.active and self.states:
+            raise ValueError("--states lists official init states to replay on; with --resets-seed the replays are on "
+                             "randomised resets (--episodes)")
+        if self.resets.active and self.shift.active:
+            raise ValueError("--object-shift-cm shifts the object from official init states; --resets-seed replays "
+                             "on randomised resets: use one or the other")
 
     def teleop(self) -> TeleopParams | None:
         """The teleoperator model at this diversity, or None for the scripted expert."""
@@ -80,14 +96,50 @@ class Settings:
         # Unshifted, scripted results keep the settings they were recorded with.
         shift = {"shift": asdict(self.shift)} if self.shift.active else {}
         style = {"style": self.style, "diversity": self.diversity} if self.style != DEFAULT_STYLE else {}
+        resets = {"resets": self.resets.as_dict()} if self.resets.active else {}
         return {"states": list(self.states), "source_state": self.source_state, "cap": self.cap,
-                "settle_steps": self.settle_steps, "seed": self.seed, "half_turn": self.half_turn, **shift, **style}
+                "settle_steps": self.settle_steps, "seed": self.seed, "half_turn": self.half_turn, **shift, **style,
+                **resets}
+
+    def replay_episodes(self, source: int) -> list[int]:
+        """The replays of the plan from official init state `source`: the indices of the randomised-reset episodes,
+        or the official init states `states` less `source` (`excluded`)."""
+        if self.resets.active:
+            return list(range(self.resets.episodes))
+        return [s for s in self.states if s not in self.excluded(source)]
+
+    def excluded(self, source: int) -> list[int]:
+        """`source` if it is one of `states` and its start is the plan's own (not shifted): that replay is the
+        own-start check, not counted."""
+        return [s for s in self.states if s == source and not self.shift.active]
 
 
 def style_of(settings: dict) -> dict:
     """{"style": ..., and "diversity" for the teleoperator model} of a result's settings (`Settings.as_dict`)."""
     style = settings.get("style", DEFAULT_STYLE)
     return {"style": style, **({"diversity": settings["diversity"]} if style != DEFAULT_STYLE else {})}
+
+
+def starts_of(settings: dict) -> dict:
+    """The set of starts of a result's settings: {"starts": "official"}, or on randomised resets
+    {"starts": "resets", "resets_seed": s, "placement_spread_cm": S}."""
+    resets = settings.get("resets")
+    if resets is None:
+        return {"starts": "official"}
+    return {"starts": "resets", "resets_seed": resets["seed"], "placement_spread_cm": resets["placement_spread_cm"]}
+
+
+def default_folder(style: str, resets: ResetSpec) -> Path:
+    """The output folder of a report of this style on these starts unless `--out` says: one per style and set of
+    starts, e.g. results/blind_replay (scripted, official init states) or
+    results/blind_replay_resets3000_placed3cm_teleop (teleop, `--resets-seed 3000 --placement-spread-cm 3`)."""
+    name = DEFAULT_OUT.name
+    if resets.active:
+        name += f"_resets{resets.seed}" + (f"_placed{resets.placement_spread_cm:g}cm" if resets.placement_spread_cm
+                                           else "")
+    if style != DEFAULT_STYLE:
+        name += f"_{style}"
+    return DEFAULT_OUT.with_name(name)
 
 
 def task_path(out: Path, suite: str, task_id: int) -> Path:
@@ -132,24 +184,33 @@ def record_plan(env, init_state: np.ndarray, seed: int, settings: Settings) -> d
             "note": episode.note}
 
 
-def replay(env, init_state: np.ndarray, actions: np.ndarray, seed: int, settings: Settings) -> int | None:
-    """`actions` then idle steps up to `settings.cap`, without observation; the step count at the first success,
-    or None."""
+def _official_start(env, init_state: np.ndarray, seed: int, settings: Settings) -> None:
     _reset(env, init_state, seed)
     for _ in range(settings.settle_steps):
         env.step(IDLE)
+
+
+def replay(env, init_state: np.ndarray, actions: np.ndarray, seed: int, settings: Settings) -> int | None:
+    """From `init_state` after the settle steps, `actions` then idle steps up to `settings.cap`, without observation;
+    the step count at the first success, or None."""
+    _official_start(env, init_state, seed, settings)
     return _play(env, actions, settings)
 
 
-def replay_shifted(env, init_state: np.ndarray, actions: np.ndarray, seed: int, settings: Settings,
-                   shifts: ShiftedResets, episode: int) -> tuple[int | None, dict]:
-    """`replay` from `init_state` with episode `episode`'s shift (`object_shift`); also how the shifted object
-    settled (`ShiftedResets.settle`, after the settle steps)."""
-    _reset(env, shifts.shifted(env, init_state, episode), seed)
-    for _ in range(settings.settle_steps):
-        env.step(IDLE)
-    settled = shifts.settle(env)
-    return _play(env, actions, settings), {k: v for k, v in settled.items() if k != "spec"}
+def start(env, init_states: np.ndarray | None, episode: int, settings: Settings) -> dict | None:
+    """Put `env` where replay episode `episode` starts, its settle steps taken: with `settings.resets`, lerobot-eval's
+    randomised reset of episode `episode` (`eval_start`; `init_states` unused); else official init state `episode` of
+    `init_states` (fixture poses seeded with `settings.seed + episode`), with `settings.shift` moved as lerobot-eval's
+    episode `episode` on it (`object_shift`). The start's record (reset seed and placement shift, or how the shifted
+    object settled), or None (official, not shifted)."""
+    if settings.resets.active:
+        return eval_start(env, settings.resets.reset_seed(episode), settings.resets.placement_spread_cm)
+    if not settings.shift.active:
+        _official_start(env, init_states[episode], settings.seed + episode, settings)
+        return None
+    shifts = ShiftedResets(settings.shift)
+    _official_start(env, shifts.shifted(env, init_states[episode], episode), settings.seed + episode, settings)
+    return {k: v for k, v in shifts.settle(env).items() if k != "spec"}
 
 
 def _play(env, actions: np.ndarray, settings: Settings) -> int | None:
@@ -162,31 +223,30 @@ def _play(env, actions: np.ndarray, settings: Settings) -> int | None:
 
 def plan_replays(env, init_states: np.ndarray, source: int, settings: Settings, progress=None) -> dict:
     """The plan recorded from official init state `source` (`record_plan`, episode seed `settings.seed + source`),
-    replayed on its own source state and on `settings.states` less `source`; `progress` is called after every
-    episode."""
+    replayed on its own source state and on `settings.replay_episodes(source)` (`start`); `progress` is called after
+    every episode."""
     tick = progress or (lambda: None)
     plan = record_plan(env, init_states[source], settings.seed + source, settings)
     tick()
     own = replay(env, init_states[source], plan["actions"], settings.seed + source, settings)
     tick()
-    states = [s for s in settings.states if s != source]
-    outcomes, settles = {}, {}
-    for state in states:
-        if settings.shift.active:  # episode index = the state's, as lerobot-eval's episode k on state k
-            outcomes[str(state)], settles[str(state)] = replay_shifted(
-                env, init_states[state], plan["actions"], settings.seed + state, settings,
-                ShiftedResets(settings.shift), state)
-        else:
-            outcomes[str(state)] = replay(env, init_states[state], plan["actions"], settings.seed + state, settings)
+    episodes = settings.replay_episodes(source)
+    outcomes, records = {}, {}
+    for episode in episodes:  # on official init states the episode index is the state's, as lerobot-eval's k on k
+        record = start(env, init_states, episode, settings)
+        outcomes[str(episode)] = _play(env, plan["actions"], settings)
+        if record is not None:
+            records[str(episode)] = record
         tick()
+    starts = ({"reset_episodes": episodes, "resets": records} if settings.resets.active
+              else {"states": episodes, **({"shifts": records} if records else {})})
     return {
         "source_state": source, "source_success": plan["success"], "source_steps": plan["steps"],
         "source_note": plan["note"], "source_replay_step": own,
-        "excluded_states": [s for s in settings.states if s == source],
-        "states": states, "success_step": outcomes,
+        "excluded_states": settings.excluded(source),
+        **starts, "success_step": outcomes,
         "successes": sum(v is not None for v in outcomes.values()), "episodes": len(outcomes),
         "plan": plan["actions"].round(6).tolist(),
-        **({"shifts": settles} if settles else {}),
     }
 
 
@@ -219,7 +279,7 @@ def run_task(suite: str, task_id: int, settings: Settings, progress=None) -> dic
 
 def episodes_per_task(settings: Settings) -> int:
     """Episodes of one task for the progress bar: per plan a recording, its own-source replay and the replays."""
-    return len(PLANS) * (2 + len(settings.states))
+    return len(PLANS) * (2 + (settings.resets.episodes if settings.resets.active else len(settings.states)))
 
 
 def load_task(path: Path) -> dict | None:
@@ -240,6 +300,7 @@ def _entry(task: dict) -> dict:
 
     return {**numbers(first), "task_name": task["task_name"], "states": task["settings"]["states"],
             "cap": task["settings"]["cap"], "seconds": task["seconds"], **style_of(task["settings"]),
+            **starts_of(task["settings"]), **({"reset_episodes": first["reset_episodes"]} if "resets" in first else {}),
             NEAREST_MEAN_KEY: numbers(second)}
 
 
@@ -288,11 +349,28 @@ def plan_words(entry: dict) -> str:
     return f"The teleoperator model's demonstration (`--style {entry['style']}`, diversity {entry['diversity']:g})"
 
 
+def starts_words(entry: dict) -> str:
+    """The starts a report entry (`_entry`) was replayed on, for the report's text."""
+    if entry.get("starts", "official") == "official":
+        return f"Replay states {_states_text(entry['states'])}"
+    episodes = entry["reset_episodes"]
+    seeds = f"{entry['resets_seed'] + episodes[0]}-{entry['resets_seed'] + episodes[-1]}"
+    spread = entry["placement_spread_cm"]
+    return (f"Randomised resets: episodes {_states_text(episodes)} of `lerobot-eval --env.init_states=false "
+            f"--seed={entry['resets_seed']}" + (f" --env.placement_spread_cm={spread:g}" if spread else "") +
+            f"` (reset seeds {seeds})")
+
+
 def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
-    who = plan_words(next(iter(next(iter(report.values())).values())))
+    entry = next(iter(next(iter(report.values())).values()))
+    if entry.get("starts", "official") == "official":
+        where = "other official init states: `set_init_state`,"
+    else:
+        where = ("the randomised resets `predvla_libero` starts `lerobot-eval --env.init_states=false` episodes from "
+                 "(the same reset seeds, placement shifts and arm start), then")
     lines = markdown_head("One demonstration replayed blind",
-             f"{who} (its actions) from one official init state of each task, replayed action by "
-             "action with no observation on other official init states: `set_init_state`, the settle steps, the "
+             f"{plan_words(entry)} (its actions) from one official init state of each task, replayed action by "
+             f"action with no observation on {where} the settle steps, the "
              "plan, then idle steps (arm still, gripper open) up to the step cap; success is LIBERO's "
              "`check_success()` after any step. Two plans per task, both chosen before any outcome: from official "
              "init state 0, and from the official init state whose object placements are nearest their mean over "
@@ -304,7 +382,7 @@ def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
         s0, n0 = totals(tasks)
         s1, n1 = totals(tasks, NEAREST_MEAN_KEY)
         lines += [f"## {suite}", "",
-                  f"Replay states {_states_text(first['states'])}, {first['cap']}-step cap. "
+                  f"{starts_words(first)}, {first['cap']}-step cap. "
                   f"Plan from state 0: **{s0}/{n0} ({_pct(s0, n0)})**; plan from the nearest-mean state: "
                   f"**{s1}/{n1} ({_pct(s1, n1)})**. Wall time {sum(t['seconds'] for t in tasks.values()) / 60:.0f} "
                   "min (one process, physics only).", ""]
