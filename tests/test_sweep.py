@@ -546,3 +546,21 @@ def test_data_only_makes_the_datasets_without_frames_and_stops(tmp_path, monkeyp
 
 def arg_value(command: list[str], flag: str) -> str:
     return command[command.index(flag) + 1]
+
+
+def test_train_only_trains_what_the_runs_need_and_evaluates_nothing(tmp_path, monkeypatch, capsys):
+    """`predvla sweep --train-only` runs each pending unit's training (once for a checkpoint several runs share) and no
+    lerobot-eval; the next call without it evaluates from those checkpoints without training again."""
+    from lerobot_predvla.cli import sweep as sweep_cli
+
+    path = sweep_file(tmp_path)
+    fake = FakeLeRobot()
+    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir: Runner(sweep, runs_dir, execute=fake))
+    assert predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs"), "--train-only"]) == 0
+    assert fake.count("lerobot-train") == 6 and fake.count("lerobot-eval") == 0
+    assert "6 trainings finished, 0 failed (no evaluation)" in capsys.readouterr().out
+    assert not (tmp_path / "runs" / "records").exists()
+    later = FakeLeRobot()
+    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir: Runner(sweep, runs_dir, execute=later))
+    assert predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs")]) == 0
+    assert later.count("lerobot-train") == 0 and later.count("lerobot-eval") == 10

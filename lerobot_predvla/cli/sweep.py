@@ -46,6 +46,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--data-only", action="store_true",
                         help="Make the suites' datasets (the file's `data` stages, each timed in "
                              "RUNS_DIR/data/<suite>.json) and stop before any training.")
+    parser.add_argument("--train-only", action="store_true",
+                        help="Train (or resume) what the pending runs need, publish as the file says, and evaluate "
+                             "nothing; a later call without it evaluates from the finished trainings.")
     parser.set_defaults(func=run)
 
 
@@ -91,10 +94,14 @@ def run(args: argparse.Namespace) -> int:
             print(f"predvla sweep: datasets of {sum(made)} of {len(made)} suites ready; stage times in "
                   f"{args.runs_dir / 'data'}")
             return 0 if all(made) else 1
-        outcome = runner.run(args.configs, shard)
+        outcome = runner.run(args.configs, shard, train_only=args.train_only)
     except SweepError as err:
         print(f"predvla sweep: error: {err}", file=sys.stderr)
         return 2
+    if args.train_only:
+        print(f"predvla sweep: {len(outcome['trained'])} trainings finished, {len(outcome['failed'])} failed "
+              f"(no evaluation); checkpoints in {args.runs_dir / 'train'}")
+        return 1 if outcome["failed"] else 0
     print(f"predvla sweep: {len(outcome['done'])} runs done, {len(outcome['skipped'])} already done, "
           f"{len(outcome['failed'])} failed; records in {args.runs_dir / 'records'}")
     return 1 if outcome["failed"] else 0

@@ -101,12 +101,15 @@ class Runner(Training, Evaluation):
         return commands
 
     def run(
-        self, configs: list[str] | None = None, shard: tuple[int, int] = (0, 1), progress: bool = True
+        self, configs: list[str] | None = None, shard: tuple[int, int] = (0, 1), progress: bool = True,
+        train_only: bool = False,
     ) -> dict[str, list[str]]:
-        """Run (or skip) this shard's runs. Returns run keys by outcome: done, skipped, failed."""
+        """Run (or skip) this shard's runs. Returns run keys by outcome: done, skipped, failed, and with `train_only`
+        (train what the pending runs need, evaluate nothing) `trained`: the trainings (config/suite/seed) that are
+        finished and evaluable."""
         self.write_plan(self.sweep.runs(configs), configs)
         units = self.shard_units(configs, shard)
-        outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": []}
+        outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": [], "trained": []}
         bar = tqdm(total=sum(len(r) for _, r in units), desc=f"sweep shard {shard[0]}/{shard[1]}", disable=not progress)
         for (trained, suite, seed), unit_runs in units:
             pending = [r for r in unit_runs if not self.is_recorded(r)]
@@ -121,6 +124,10 @@ class Runner(Training, Evaluation):
                 and self.evaluable_checkpoint(train_result, self.train_dir(trained, suite, seed)) is None
             ):
                 train_result = None
+            if train_only:
+                outcome["trained" if train_result is not None else "failed"].append(f"{trained}/{suite}/seed{seed}")
+                bar.update(len(pending))
+                continue
             for run in pending:
                 bar.set_postfix_str(run.key)
                 ok = train_result is not None and self.evaluate(run, train_result)
