@@ -47,6 +47,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from lerobot_predvla.cli.demos import add_style_arguments
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.sims.libero.blind_replay import (
     DEFAULT_OUT,
@@ -72,7 +73,7 @@ from lerobot_predvla.sims.libero.cross_task_report import write_cross_report
 from lerobot_predvla.sims.libero.env import num_tasks
 from lerobot_predvla.sims.libero.eval_resets import ResetSpec
 from lerobot_predvla.sims.libero.expert.motion import DEFAULT_HALF_TURN, HALF_TURN_RULES
-from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE, STYLES
+from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE
 from lerobot_predvla.sims.libero.object_shift import PATTERNS, ShiftSpec
 from lerobot_predvla.sims.libero.protocol import PAPER_EPISODE_LENGTH
 from lerobot_predvla.utils.io import atomic_write_json
@@ -134,12 +135,7 @@ def add_parser(subparsers) -> None:
                         "--env.object_shift_cm does on official init state k (default 0: none)")
     p.add_argument("--object-shift-pattern", choices=PATTERNS, default="ring", help="as --env.object_shift_pattern")
     p.add_argument("--object-shift-directions", type=int, default=8, help="as --env.object_shift_directions")
-    p.add_argument("--style", choices=STYLES, default=DEFAULT_STYLE,
-                   help="who executes the plan recorded from the source state: the scripted expert (default) or the "
-                        "teleoperator model (as `predvla demos --style`)")
-    p.add_argument("--diversity", type=float, default=None,
-                   help="with --style teleop: the teleoperator model's diversity (default 1, the committed setting; "
-                        "0: the script's actions exactly)")
+    add_style_arguments(p, "the plan recorded from the source state")
     p.add_argument("--resets-seed", type=int, default=None,
                    help="replay on randomised resets instead of official init states: episode i starts as lerobot-eval "
                         "--env.type=predvla_libero --env.init_states=false --seed=RESETS_SEED starts episode i")

@@ -51,18 +51,23 @@ def add_parser(subparsers) -> None:
                    help="with --no-render only: start attempt k from the benchmark's official init state k instead "
                    "of a randomised reset, to measure the expert where the policies are evaluated (demonstrations "
                    "are never recorded from evaluation states)")
-    p.add_argument("--style", choices=STYLES, default=DEFAULT_STYLE,
-                   help="who executes the expert's plan: the script (default; every recorded dataset) or the "
-                   "teleoperator model (curved paths, varying speed, idle stretches, overshoots, regrasps; "
-                   "lerobot_predvla/sims/libero/expert/teleop.py)")
-    p.add_argument("--diversity", type=float, default=None,
-                   help="with --style teleop: how strongly the teleoperator model perturbs the plan (0: the script's "
-                   "actions exactly; 1, the default: the committed setting)")
+    add_style_arguments(p, "the expert's plan")
     p.add_argument("--placement-spread-cm", type=float, default=0.0,
                    help="std (cm, per axis, truncated at 2 std) of a seeded x, y shift of every movable object after "
                    "each reset (default 0: LIBERO's placements, which spread the objects by a few mm)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
+
+
+def add_style_arguments(p: argparse.ArgumentParser, plan: str) -> None:
+    """`--style` and `--diversity`: who executes `plan` (the script or the teleoperator model) and how strongly."""
+    p.add_argument("--style", choices=STYLES, default=DEFAULT_STYLE,
+                   help=f"who executes {plan}: the script (default) or the teleoperator model "
+                   "(curved paths, varying speed, idle stretches, overshoots, regrasps; "
+                   "lerobot_predvla/sims/libero/expert/teleop.py)")
+    p.add_argument("--diversity", type=float, default=None,
+                   help="with --style teleop: how strongly the teleoperator model perturbs the plan (0: the script's "
+                   "actions exactly; 1, the default: the committed setting)")
 
 
 def run(args: argparse.Namespace) -> int:
