@@ -25,7 +25,8 @@ CONFIGS = [
 
 
 class FakeShiftedEval(FakeLeRobot):
-    """lerobot-eval that also writes `predvla_shifts` with one unsettled episode when objects are shifted."""
+    """lerobot-eval that also writes `predvla_shifts` with one unsettled episode (episode 3 of the first task it
+    evaluates) when objects are shifted."""
 
     def __call__(self, command: list[str], log: Path) -> int:
         code = super().__call__(command, log)
@@ -33,7 +34,8 @@ class FakeShiftedEval(FakeLeRobot):
         if any(c.endswith("lerobot-eval") for c in command) and cm not in (None, "0"):
             path = Path(arg(command, "output_dir")) / "eval_info.json"
             info = json.loads(path.read_text())
-            info["predvla_shifts"] = {"episodes": [], "unsettled_episodes": [{"task_id": 0, "episode_ix": 3}]}
+            task = json.loads(arg(command, "env.task_ids") or "[0]")[0]
+            info["predvla_shifts"] = {"episodes": [], "unsettled_episodes": [{"task_id": task, "episode_ix": 3}]}
             path.write_text(json.dumps(info))
         return code
 
@@ -52,14 +54,17 @@ def test_shift_and_variant_entries_become_env_flags_records_and_their_own_table(
     record = json.loads((tmp_path / "runs/records/shift4/libero_object/seed0.json").read_text())
     assert record["object_shift"] == {"cm": 4, "pattern": "ring", "directions": 20}
     assert record["shift_unsettled"] == 1 and record["variant"] is None
+    assert record["shift_unsettled_episodes"] == {"0": [3], "1": [], "2": []}
     assert json.loads((tmp_path / "runs/records/pro_x01/libero_object/seed0.json").read_text())["variant"] == \
         "pro_temp_x0.1"
 
     summary = write_report(tmp_path / "runs", tmp_path / "report")
     report = (tmp_path / "report" / "report.md").read_text()
     section = report.split("## Robustness")[1].split("\n## ")[0]
-    # fake successes: task t, seed 0 succeeds in 50 - t of 50 episodes (tasks 0-2): 147/150
-    assert f"| {POLICY} | object | 98.0 (147/150) | 98.0 (147/150), 1 unsettled | 98.0 (147/150) |" in section
+    # fake successes: task t, seed 0 succeeds in 50 - t of 50 episodes (tasks 0-2): 147/150; without the unsettled
+    # episode (task 0's episode 3, a success) 146/149
+    assert (f"| {POLICY} | object | 98.0 (147/150) | 98.0 (147/150), 1 unsettled; settled 98.0 (146/149) | "
+            "98.0 (147/150) |") in section
     assert "| Policy | Suite | 0 cm | 4 cm | pro_temp_x0.1 |" in section
     assert summary["figures"]["robustness"] == "success_vs_shift.png"
     assert (tmp_path / "report" / "success_vs_shift.png").is_file()
@@ -75,16 +80,18 @@ def _record(label: str, suite: str, cm: float | None, successes: int, variant: s
 
 def test_robustness_table_pools_seeds_orders_conditions_and_leaves_other_runs_out(tmp_path):
     records = [
-        _record("BC", "libero_object", 4, 10, shift_unsettled=2),
-        _record("BC", "libero_object", 4, 5, seed=1),
-        _record("BC", "libero_object", 0, 20),
+        _record("BC", "libero_object", 4, 10, shift_unsettled=2),  # a record that kept the count alone
+        _record("BC", "libero_object", 4, 5, seed=1, shift_unsettled=0),
+        _record("BC", "libero_object", 0, 20, shift_unsettled=0),
         _record("BC", "libero_object", None, 12, variant="plus_language_3"),
         _record("PredVLA", "libero_object", 2, 8),
         {**_record("main", "libero_object", None, 20)},  # neither shifted nor a variant: not in the table
     ]
     text = robustness_table(records)
     assert text.splitlines()[0] == "| Policy | Suite | 0 cm | 2 cm | 4 cm | plus_language_3 |"
-    assert f"| BC | object | 100.0 (20/20) | {MISSING} | 37.5 (15/40), 2 unsettled | 60.0 (12/20) |" in text
+    assert (f"| BC | object | 100.0 (20/20) | {MISSING} | 37.5 (15/40), 2 unsettled; settled n/a | 60.0 (12/20) "
+            "|") in text
+    assert "| PredVLA | object | — | 40.0 (8/20); settled n/a | — | — |" in text  # neither count nor episodes
     assert "main" not in text
     assert robustness_table([_record("main", "libero_object", None, 20)]) is None
     assert robustness_figure(records, tmp_path / "f.png") and (tmp_path / "f.png").is_file()

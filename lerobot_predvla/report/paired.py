@@ -2,13 +2,14 @@
 episode by episode, from the runs' `eval_info.json` files. Both runs of a seed start from the same init states when
 they share the evaluation seed, reset mode and protocol, so each episode is a pair; the report counts the pairs that
 succeed in only one of the two and gives the exact two-sided sign test on them. Two runs that load one checkpoint
-path pair only when they evaluated the same weights (`same_model`). A pool (`pool_with`) gets one sign test over all
-its configurations' pairs."""
+path pair only when they evaluated the same weights (`same_model`). A pool, of further seeds (`pool_with`) or of
+other evaluation sets (`pool_sets`), gets one sign test over all its configurations' pairs. Where an object was
+shifted, the pairs are counted once more without the episodes whose shifted object did not settle in either run."""
 
 from collections.abc import Iterable
 from pathlib import Path
 
-from lerobot_predvla.report.results import run_episodes
+from lerobot_predvla.report.results import run_episodes, unsettled_keys
 from lerobot_predvla.utils.statistics import percent, sign_test
 
 PAIRING_KEYS = ("eval_seed", "init_states", "episode_length")
@@ -38,8 +39,24 @@ def sum_counts(parts: Iterable[dict[str, int]]) -> dict[str, int]:
     return {count: sum(part[count] for part in parts) for count in PAIR_COUNTS}
 
 
+def _add_pairs(tasks: dict[str, dict[str, int]], mine: dict, theirs: dict, keys: Iterable[tuple[str, int]]) -> None:
+    """Count the episode pairs `keys` of two runs (`run_episodes`) into `tasks` (task -> PAIR_COUNTS)."""
+    for key in keys:
+        a, b = mine[key], theirs[key]
+        task = tasks.setdefault(key[0], dict.fromkeys(PAIR_COUNTS, 0))
+        for count, value in zip(PAIR_COUNTS, (1, a, b, a and not b, b and not a), strict=True):
+            task[count] += value
+
+
+def _tested(counts: dict[str, int]) -> dict:
+    return {**counts, "sign_test_p": sign_test(counts["only"], counts["only_against"])}
+
+
 def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
-    """Add `episodes` (per suite: pairs, successes, discordant counts, sign test) to every `compare_to` entry."""
+    """Add `episodes` (per suite: pairs, successes, discordant counts, sign test) to every `compare_to` entry; where
+    an object was shifted, `settled`: the same over the pairs whose shifted objects settled in both runs (None when a
+    record does not tell which did). Then the pools: `pool_with` (further seeds) and `pool_sets` (other evaluation
+    sets), one sign test over all their configurations' pairs."""
     by_run = {(r["config"], r["suite"], int(r["seed"])): r for r in records}
     for name, entry in summary["configs"].items():
         against = entry.get("compare_to")
@@ -63,33 +80,37 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
                 if seed not in seeds
             )
             tasks: dict[str, dict[str, int]] = {}  # task -> PAIR_COUNTS over its paired episodes
+            settled: dict[str, dict[str, int]] | None = {}  # the same over the pairs that settled in both runs
+            shifted = False
             for seed in seeds:
+                runs = by_run[(name, suite, seed)], by_run[(against, suite, seed)]
                 mine, theirs = (run_episodes(runs_dir, c, suite, seed) for c in (name, against))
-                for key in mine.keys() & theirs.keys():
-                    a, b = mine[key], theirs[key]
-                    task = tasks.setdefault(key[0], dict.fromkeys(PAIR_COUNTS, 0))
-                    for count, value in zip(PAIR_COUNTS, (1, a, b, a and not b, b and not a), strict=True):
-                        task[count] += value
+                keys = mine.keys() & theirs.keys()
+                _add_pairs(tasks, mine, theirs, keys)
+                shifted = shifted or any(r.get("object_shift") for r in runs)
+                unsettled = [unsettled_keys(r) for r in runs]
+                if settled is not None and None not in unsettled:
+                    _add_pairs(settled, mine, theirs, keys - set.union(*unsettled))
+                else:
+                    settled = None
             if tasks:
-                counts = sum_counts(tasks.values())
-                entry.setdefault("episodes", {})[suite] = {
+                paired = entry.setdefault("episodes", {})[suite] = {
                     "against": against,
                     "seeds": seeds,
-                    **counts,
-                    "sign_test_p": sign_test(counts["only"], counts["only_against"]),
+                    **_tested(sum_counts(tasks.values())),
                     "tasks": dict(sorted(tasks.items(), key=lambda item: int(item[0]))),
                 }
-    for pool in summary.get("pooled", {}).values():
+                if shifted:
+                    paired["settled"] = None if settled is None else _tested(sum_counts(settled.values()))
+    for pool in [*summary.get("pooled", {}).values(), *summary.get("pooled_sets", {}).values()]:
         for suite in summary["suites"]:
             parts = [e for name in pool["configs"] if (e := summary["configs"][name].get("episodes", {}).get(suite))]
             if len(parts) < 2:  # one configuration's pairs are already in the table as they are
                 continue
-            counts = sum_counts(parts)
             pool.setdefault("episodes", {})[suite] = {
                 "against": " + ".join(e["against"] for e in parts),
-                "seeds": sorted(seed for e in parts for seed in e["seeds"]),
-                **counts,
-                "sign_test_p": sign_test(counts["only"], counts["only_against"]),
+                "seeds": sorted({seed for e in parts for seed in e["seeds"]}),
+                **_tested(sum_counts(parts)),
             }
 
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot_predvla.sims.libero.protocol import SHORT_SUITES
-from lerobot_predvla.sweep.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
+from lerobot_predvla.sweep.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes, recorded_unsettled
 from lerobot_predvla.sweep.layout import PLAN_FILE, RECORDS_DIR, eval_run_dir
 from lerobot_predvla.utils.statistics import success_rate, task_rates
 
@@ -67,6 +67,16 @@ def run_episodes(runs_dir: Path, config: str, suite: str, seed: int) -> dict[tup
     return episodes
 
 
+def unsettled_keys(record: dict) -> set[tuple[str, int]] | None:
+    """The (task id, episode index) of a run's episodes whose shifted object did not settle where it was put (as
+    `run_episodes` keys them): none for a run without shifted objects; None when its record does not tell which
+    (`recorded_unsettled`)."""
+    if not record.get("object_shift"):
+        return set()
+    unsettled = recorded_unsettled(record)
+    return None if unsettled is None else {(task, i) for task, episodes in unsettled.items() for i in episodes}
+
+
 @dataclass
 class Results:
     """Per-seed success rates and per-task rates, indexed by configuration and suite."""
@@ -91,7 +101,8 @@ class Results:
                 r["config"],
                 {
                     k: r.get(k)
-                    for k in ("group", "label", "compare_to", "pool_with", "branch", "corruption", "eval_overrides")
+                    for k in ("group", "label", "compare_to", "pool_with", "pool_sets", "branch", "corruption",
+                              "eval_overrides")
                 },
             )
             if r.get("parameters") is not None:
@@ -123,6 +134,10 @@ class Results:
             if c.get("pool_with") in self.configs:  # a target neither planned nor recorded has no row to join
                 pools.setdefault(c["pool_with"], [c["pool_with"]]).append(name)
         return pools
+
+    def set_pools(self) -> dict[str, list[str]]:
+        """Each configuration with `pool_sets`, with the configurations it lists: `{target: [target, *listed]}`."""
+        return {name: [name, *c["pool_sets"]] for name, c in self.configs.items() if c.get("pool_sets")}
 
     def of_group(self, group: str) -> list[str]:
         return [name for name, c in self.configs.items() if c.get("group") == group]

@@ -1,7 +1,8 @@
 """The statistics of a report (its `report.json`): per configuration and suite, the mean and sample standard
 deviation of the success rate across seeds; 3-suite (spatial, goal, object) and 4-suite means of the suite means,
-which need every suite; paired differences over the seeds two configurations both have; and one cell over the union
-of the seeds of the configurations that pool (`pool_with`)."""
+which need every suite; paired differences over the seeds two configurations both have; one cell over the union
+of the seeds of the configurations that pool (`pool_with`); and the configurations whose paired comparisons pool over
+evaluation sets (`pool_sets`, their episodes counted by `paired.paired_episodes`)."""
 
 import numpy as np
 
@@ -98,4 +99,7 @@ def summarize(results: Results) -> dict:
             "mean3": suites_mean([cells.get(s, {"mean": None}) for s in SHORT_SUITES]),
             "mean4": suites_mean([cells.get(s, {"mean": None}) for s in SUITES]),
         }
+    set_pools = results.set_pools()
+    if set_pools:  # (a report without them keeps the keys it had)
+        out["pooled_sets"] = {target: {"configs": names} for target, names in set_pools.items()}
     return out

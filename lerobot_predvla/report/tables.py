@@ -198,9 +198,13 @@ def corruption_table(summary: dict) -> str | None:
 
 
 def episodes_table(summary: dict) -> str | None:
-    """Paired episodes of every `compare_to` pair, then of every pool (`pool_with`) over its seeds together."""
-    entries = [(name, entry) for name, entry in summary["configs"].items()] + [
-        (" + ".join(pool["configs"]), pool) for pool in summary.get("pooled", {}).values()
+    """Paired episodes of every `compare_to` pair, then of every pool over its seeds (`pool_with`) or evaluation
+    sets (`pool_sets`) together."""
+    entries = [
+        *summary["configs"].items(),
+        *((" + ".join(pool["configs"]), pool) for pool in summary.get("pooled", {}).values()),
+        *((f"{' + '.join(pool['configs'])}, pooled over evaluation sets", pool)
+          for pool in summary.get("pooled_sets", {}).values()),
     ]
     rows = [
         [

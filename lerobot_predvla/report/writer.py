@@ -14,7 +14,12 @@ from lerobot_predvla.report.figures import (
 from lerobot_predvla.report.formatting import MISSING
 from lerobot_predvla.report.paired import paired_episodes
 from lerobot_predvla.report.results import SUMMARY_FILE, Results, load_plan, load_records
-from lerobot_predvla.report.robustness import ROBUSTNESS_FIGURE, robustness_figure, robustness_table
+from lerobot_predvla.report.robustness import (
+    ROBUSTNESS_FIGURE,
+    robustness_figure,
+    robustness_pairs_table,
+    robustness_table,
+)
 from lerobot_predvla.report.sections import (
     START_SPREAD_FILE,
     fresh_clone_section,
@@ -114,11 +119,16 @@ def write_report(runs_dir: Path, out: Path) -> dict:
         ),
         (
             "Robustness: shifted objects and LIBERO-PRO / LIBERO-plus variants",
-            robustness_table(records),
+            "\n\n".join(t for t in (robustness_table(records, runs_dir), robustness_pairs_table(records, summary))
+                        if t) or None,
             "robustness",
             "Success in % (successes/episodes, pooled over seeds) per condition: the object to pick shifted by the "
             "distance shown from each official init state, or a LIBERO-PRO / LIBERO-plus variant of the suite; "
-            "unsettled: episodes whose shifted object did not rest where it was put (docs/evaluation.md).",
+            "unsettled: episodes whose shifted object did not rest where it was put (docs/evaluation.md), and "
+            "settled: the success without them (n/a: the run's record does not name them). Then each configuration "
+            "with `compare_to` against the run it names, episode by episode from the same starts: pairs that succeed "
+            "in both, in only one, in neither, and the exact two-sided sign test on those that succeed in only one; "
+            "once over all pairs, once without the pairs whose shifted object did not settle in either run.",
         ),
         (
             "Corrupted observations",

@@ -16,7 +16,13 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lerobot_predvla import lerobot_commands
-from lerobot_predvla.sweep.eval_info import EVAL_INFO_FILE, EvalInfoError, parse_eval_info, unsettled_episodes
+from lerobot_predvla.sweep.eval_info import (
+    EVAL_INFO_FILE,
+    EvalInfoError,
+    parse_eval_info,
+    recorded_unsettled,
+    unsettled_episodes,
+)
 from lerobot_predvla.sweep.layout import EVAL_WALL_FILE
 from lerobot_predvla.sweep.spec import ConfigSpec, Run, SweepError
 from lerobot_predvla.sweep.workspace import Workspace
@@ -151,20 +157,25 @@ class Evaluation(Workspace):
         if not all(finished):
             return False
         tasks, walls = self.part_results([out for out, _ in parts])
-        unsettled = sum(unsettled_episodes(out / EVAL_INFO_FILE) for out, _ in parts)
+        unsettled: dict | None = {task: [] for task in tasks}  # task -> its unsettled episodes' indices
+        for out, _ in parts:
+            unsettled.update(unsettled_episodes(out / EVAL_INFO_FILE))
+        unsettled_count = sum(map(len, unsettled.values()))
         commands = [command for _, command in parts]
         eval_tasks = self.sweep.settings.eval_tasks
         if earlier is not None:  # the earlier record's other tasks, with their commands and wall time
             new = [i for i, (task, _) in enumerate(walls) if task not in earlier["tasks"]]
+            new_tasks = sorted(set(tasks) - set(earlier["tasks"]), key=int)
+            unsettled_count = (earlier.get("shift_unsettled") or 0) + sum(len(unsettled[t]) for t in new_tasks)
+            before = recorded_unsettled(earlier)  # None: an earlier record that kept the count alone
+            unsettled = None if before is None else dict(
+                sorted({**before, **{t: unsettled[t] for t in new_tasks}}.items(), key=lambda kv: int(kv[0])))
             earlier_commands = earlier.get("commands", {}).get("eval") or []
             if earlier_commands and isinstance(earlier_commands[0], str):
                 earlier_commands = [earlier_commands]  # one part: the command itself
             commands = [*earlier_commands, *(commands[i] for i in new)]
             walls = [("", earlier.get("eval_wall_s") or 0.0), *(walls[i] for i in new)]
             tasks = dict(sorted({**earlier["tasks"], **tasks}.items(), key=lambda kv: int(kv[0])))
-            unsettled = sum(unsettled_episodes(out / EVAL_INFO_FILE) for out, _ in parts
-                            if next(iter(parse_eval_info(out / EVAL_INFO_FILE))) not in earlier["tasks"]) + (
-                earlier.get("shift_unsettled") or 0)
             eval_tasks = sorted(int(t) for t in tasks)
         successes, episodes = episode_totals(tasks.values())
         record = {
@@ -173,12 +184,15 @@ class Evaluation(Workspace):
             "label": spec.label,
             "compare_to": spec.compare_to,
             "pool_with": spec.pool_with,
+            "pool_sets": spec.pool_sets,
             "branch": spec.branch,
             "corruption": spec.corruption,
             "eval_overrides": spec.eval_overrides,
             "init_states": spec.init_states,
             "object_shift": spec.object_shift,  # with the episodes whose shifted bodies did not settle (unsettled)
-            "shift_unsettled": unsettled if spec.object_shift else None,
+            "shift_unsettled": unsettled_count if spec.object_shift else None,
+            # per task, their indices in its successes (the report's analysis without them); None: not known
+            "shift_unsettled_episodes": unsettled if spec.object_shift else None,
             "variant": spec.variant,
             "eval_seed": protocol["eval_seed"],
             "checkpoint_from": spec.checkpoint_from,

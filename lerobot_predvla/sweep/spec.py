@@ -95,6 +95,11 @@ class ConfigSpec:
             and pools their paired episodes. With `compare_to` on both, this one's must pool with the other's (open
             loop on seeds 1-2 against error regression on seeds 1-2 pools with open loop on seed 0 against error
             regression on seed 0).
+        pool_sets: The configurations that make this one's paired comparison (its `compare_to`) on other evaluation
+            sets: each evaluates the model this one evaluates, in its mode, against the model and mode of this one's
+            `compare_to`, on another set (randomised resets, shifted objects, ...). `predvla report` adds one paired
+            comparison over all their episode pairs ("pooled over E1-E3": `olt_open_loop` with `pool_sets:
+            [olt_open_loop_resets, olt_open_loop_shifted]`, docs/research/demonstrations.md).
     """
 
     name: str
@@ -119,6 +124,7 @@ class ConfigSpec:
     lr_sweep: LRSweep | None = None
     paper: dict[str, float | list[float]] = field(default_factory=dict)
     pool_with: str | None = None
+    pool_sets: list[str] | None = None
     object_shift: dict | None = None
     variant: str | None = None
 
@@ -318,7 +324,8 @@ class Sweep:
         for spec in self.configs.values():
             if spec.group not in GROUPS:
                 raise SweepError(f"{where}: configuration {spec.name}: group {spec.group!r} is not one of {GROUPS}.")
-            for ref in (spec.checkpoint_from, spec.compare_to, spec.pool_with):
+            for ref in (spec.checkpoint_from, spec.compare_to, spec.pool_with,
+                        *(spec.pool_sets if isinstance(spec.pool_sets, list) else [])):
                 if ref is not None and ref not in self.configs:
                     raise SweepError(f"{where}: configuration {spec.name} refers to unknown configuration {ref!r}.")
             if spec.checkpoint_from and (spec.train_args or spec.policy_overrides or spec.suite_overrides):
@@ -330,6 +337,8 @@ class Sweep:
                 raise SweepError(f"{where}: configuration {spec.name}: checkpoint_from must name a trained config.")
             if spec.pool_with is not None:
                 self.validate_pool(spec, where)
+            if spec.pool_sets is not None:
+                self.validate_set_pool(spec, where)
             if spec.corruption is not None:
                 self.validate_corruption(spec, where)
             if spec.lr_sweep is not None:
@@ -361,6 +370,10 @@ class Sweep:
             missing = [s for s in self.suites_of(spec) if s not in self.settings.datasets]
             if missing:
                 raise SweepError(f"{where}: `datasets` has no entry (repo_id, root) for suites {missing}.")
+        pooled = [name for spec in self.configs.values() for name in spec.pool_sets or []]
+        twice = sorted({name for name in pooled if pooled.count(name) > 1})
+        if twice:
+            raise SweepError(f"{where}: configurations {twice} are listed in more than one `pool_sets`.")
         for suite in self.settings.data:
             if not self.settings.datasets.get(suite, {}).get("root"):
                 raise SweepError(f"{where}: `data` makes {suite}'s dataset, so `datasets.{suite}` needs a `root`.")
@@ -392,6 +405,38 @@ class Sweep:
             )
         if problem:
             raise SweepError(f"{where}: configuration {spec.name}: pool_with {spec.pool_with!r}: {problem}.")
+
+    def validate_set_pool(self, spec: ConfigSpec, where: Path) -> None:
+        """`pool_sets`: every configuration listed makes `spec`'s paired comparison, each on its own evaluation set."""
+
+        def mode(c: ConfigSpec) -> tuple:  # the model evaluated and how (fields of where or how fast aside)
+            return c.checkpoint_from or c.name, _recipe(c.eval_overrides), c.corruption
+
+        def evaluation_set(c: ConfigSpec) -> tuple:
+            return c.init_states, c.eval_seed, repr(c.object_shift), c.variant, tuple(sorted(c.eval_args))
+
+        problem = None
+        if not isinstance(spec.pool_sets, list) or not spec.pool_sets:
+            problem = "expected a non-empty list of configuration names"
+        elif spec.compare_to is None:
+            problem = "it pools paired comparisons, so it needs a compare_to"
+        for name in spec.pool_sets if problem is None else []:
+            other = self.configs[name]
+            if name == spec.name or other.pool_sets:
+                problem = f"{name}: list other configurations, which list none themselves"
+            elif (other.compare_to is None or mode(other) != mode(spec)
+                  or mode(self.configs[other.compare_to]) != mode(self.configs[spec.compare_to])):
+                problem = (f"{name} must make the comparison {spec.name} makes: the model {mode(spec)[0]} evaluated "
+                           f"as {spec.name} evaluates it (checkpoint_from, eval_overrides but for where or how fast "
+                           f"they compute), with a compare_to evaluated as {spec.compare_to!r} is")
+            if problem:
+                break
+        sets = [evaluation_set(self.configs[n]) for n in [spec.name, *spec.pool_sets]] if problem is None else []
+        if len(set(sets)) < len(sets):
+            problem = ("two of its configurations evaluate on the same set (init_states, eval_seed, object_shift, "
+                       "variant, eval_args); pool further seeds with pool_with")
+        if problem:
+            raise SweepError(f"{where}: configuration {spec.name}: pool_sets {spec.pool_sets!r}: {problem}.")
 
     def validate_lr_sweep(self, spec: ConfigSpec, where: Path) -> None:
         problems = spec.lr_sweep.problems()
