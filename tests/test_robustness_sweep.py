@@ -11,6 +11,7 @@ from lerobot_predvla.report import write_report
 from lerobot_predvla.report.formatting import MISSING
 from lerobot_predvla.report.robustness import robustness_figure, robustness_table
 from lerobot_predvla.sweep import Runner, Sweep, SweepError
+from lerobot_predvla.utils.io import atomic_write_json
 
 POLICY = "PredVLA, exact open loop"
 CONFIGS = [
@@ -140,3 +141,79 @@ def test_the_looking_sweep_measures_every_policy_under_every_condition_paired_wi
                   "pro_lan", "pro_with_yellow_book", "plus_language_1"}
     assert len(rows) == 5 and all(row == conditions for row in rows.values())
     assert len(looking.configs) == 5 * len(conditions)
+
+
+def _write_run(runs: Path, config: str, successes: list[bool], **record) -> None:
+    """One seed-0 run of task 0: its eval_info.json and its record (official init states, seed 0)."""
+    part = runs / "eval" / config / "libero_object" / "seed0" / "task0"
+    atomic_write_json(part / "eval_info.json", {"per_task": [
+        {"task_group": "libero_object", "task_id": 0, "metrics": {"successes": successes}}]})
+    atomic_write_json(runs / "records" / config / "libero_object" / "seed0.json", {
+        "config": config, "suite": "libero_object", "seed": 0, "group": "robustness", "eval_seed": 0,
+        "init_states": True, "n_episodes_per_task": len(successes), "episode_length": 600, "variant": None,
+        "object_shift": None, "tasks": {"0": {"successes": sum(successes), "episodes": len(successes)}}, **record})
+
+
+def test_the_robustness_section_repeats_cells_and_paired_comparisons_without_the_unsettled_episodes(tmp_path):
+    """docs/research/looking.md: success per cell and error regression against exact open loop per condition, paired
+    episode by episode (both / only one / neither, sign test), once over all episodes and once over those whose
+    shifted object settled in both runs; "n/a" where a record kept only the unsettled count."""
+    from lerobot_predvla.report import sign_test
+
+    runs = tmp_path / "runs"
+    er, ol = [True, True, False, True, True, False], [True, False, False, False, False, True]
+    shift4 = {"object_shift": {"cm": 4}}
+    _write_run(runs, "ol4", ol, label="OL", **shift4, shift_unsettled=1, shift_unsettled_episodes={"0": [1]})
+    _write_run(runs, "er4", er, label="ER", compare_to="ol4", **shift4, shift_unsettled=1,
+               shift_unsettled_episodes={"0": [4]})
+    shift2 = {"object_shift": {"cm": 2}, "shift_unsettled": 1}  # records that kept the count alone
+    _write_run(runs, "ol2", ol, label="OL", **shift2)
+    _write_run(runs, "er2", er, label="ER", compare_to="ol2", **shift2)
+    _write_run(runs, "ol_swap", ol, label="OL", variant="pro_swap")
+    _write_run(runs, "er_swap", er, label="ER", compare_to="ol_swap", variant="pro_swap")
+    summary = write_report(runs, tmp_path / "report")
+    # All pairs: both 1 (episode 0), only ER 3 (1, 3, 4), only OL 1 (5), neither 1 (2). Without episodes 1 and 4
+    # (unsettled in one run each): both 1, only ER 1 (3), only OL 1 (5), neither 1.
+    pairs = summary["configs"]["er4"]["episodes"]["libero_object"]
+    assert (pairs["pairs"], pairs["only"], pairs["only_against"]) == (6, 3, 1)
+    assert pairs["settled"] == {"pairs": 4, "successes": 2, "against_successes": 2, "only": 1, "only_against": 1,
+                                "sign_test_p": 1.0}
+    assert summary["configs"]["er2"]["episodes"]["libero_object"]["settled"] is None
+    assert "settled" not in summary["configs"]["er_swap"]["episodes"]["libero_object"]  # nothing was shifted
+    section = (tmp_path / "report" / "report.md").read_text().split("## Robustness")[1].split("\n## ")[0]
+    assert "| Policy | Suite | 2 cm | 4 cm | pro_swap |" in section
+    # ER at 4 cm: 4/6; its settled episodes 0, 1, 2, 3, 5: 3/5. OL: 2/6; settled 0, 2, 3, 4, 5: 2/5.
+    assert ("| ER | object | 66.7 (4/6), 1 unsettled; settled n/a | 66.7 (4/6), 1 unsettled; settled 60.0 (3/5) | "
+            "66.7 (4/6) |") in section
+    assert "| OL | object | 33.3 (2/6), 1 unsettled; settled n/a | 33.3 (2/6), 1 unsettled; settled 40.0 (2/5) |" \
+        in section
+    p = f"{sign_test(3, 1):.3g}"
+    assert f"| ER | OL | object | 4 cm | 6 | 1 / 3 / 1 / 1 | {p} | 4 | 1 / 1 / 1 / 1 | 1 |" in section
+    assert f"| ER | OL | object | 2 cm | 6 | 1 / 3 / 1 / 1 | {p} | n/a | n/a | n/a |" in section
+    assert f"| ER | OL | object | pro_swap | 6 | 1 / 3 / 1 / 1 | {p} | 6 | 1 / 3 / 1 / 1 | {p} |" in section
+    rows = [line for line in section.splitlines() if line.startswith("| ER | OL |")]
+    assert [row.split(" | ")[3] for row in rows] == ["2 cm", "4 cm", "pro_swap"]  # shifts by distance, then variants
+
+
+def test_an_extended_record_keeps_the_unsettled_episodes_of_each_call_or_says_they_are_unknown(tmp_path):
+    """A record extended by a later call for other tasks (`--eval-tasks`) keeps each task's unsettled episodes; an
+    earlier record that kept only their count (written before the indices were recorded) leaves them unknown (None)
+    unless its count was 0."""
+    configs = [CONFIGS[0], CONFIGS[2]]
+
+    def run(tasks: list[int]) -> dict:
+        sweep = Sweep.load(sweep_file(tmp_path, seeds=[0], suites=["libero_object"], configs=configs,
+                                      eval={"device": "cpu", "tasks": tasks, "n_episodes": 4}))
+        assert not Runner(sweep, tmp_path / "runs", execute=FakeShiftedEval()).run(progress=False)["failed"]
+        return json.loads(path.read_text())
+
+    path = tmp_path / "runs/records/shift4/libero_object/seed0.json"
+    assert run([0])["shift_unsettled_episodes"] == {"0": [3]}
+    record = run([1, 2])
+    assert record["shift_unsettled_episodes"] == {"0": [3], "1": [3], "2": [3]} and record["shift_unsettled"] == 3
+    atomic_write_json(path, {**record, "shift_unsettled_episodes": None, "tasks": {"0": record["tasks"]["0"]},
+                             "shift_unsettled": 1})  # as written before: the count alone
+    record = run([1])
+    assert record["shift_unsettled_episodes"] is None and record["shift_unsettled"] == 2
+    atomic_write_json(path, {**record, "tasks": {"0": record["tasks"]["0"]}, "shift_unsettled": 0})
+    assert run([2])["shift_unsettled_episodes"] == {"0": [], "2": [3]}
