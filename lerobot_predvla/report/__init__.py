@@ -16,7 +16,8 @@ in only one of the two and gives the exact two-sided sign test on them. Two runs
 pair only when they evaluated the same weights (`same_model`).
 
 Configurations that name another in `pool_with` (further training seeds of the same model and evaluation) also
-get one row over the union of their seeds, and their paired episodes one sign test over all the seeds' pairs.
+get one row over the union of their seeds, and their paired episodes one sign test over all the seeds' pairs; a
+configuration's `pool_sets` (the same comparison on other evaluation sets) gets one sign test over all the sets' pairs.
 
 Modules by job: `results` (loading records, plans, episodes and `report.json`), `summary` (the statistics across
 seeds), `paired` (paired episodes), `tables`, `figures`, `sections` (stages, fresh clone, starts, mechanism,
