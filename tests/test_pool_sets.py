@@ -86,6 +86,9 @@ def test_the_report_pools_the_paired_episodes_of_the_sets_into_one_sign_test(tmp
     assert (f"| ol + ol_resets + ol_shifted, pooled over evaluation sets | er + er_resets + er_shifted | object | 0 | "
             f"12 | 3 / 7 | 1 / 5 | {sign_test(1, 5):.3g} |") in text
     assert "| ol_resets | er_resets | object | 0 | 4 | 2 / 3 | 1 / 2 |" in text
+    (runs / "records" / "ol_shifted" / "libero_object" / "seed0.json").unlink()  # not run yet, and no plan
+    pooled = write_report(runs, tmp_path / "report")["pooled_sets"]["ol"]
+    assert pooled["configs"] == ["ol", "ol_resets"] and pooled["episodes"]["libero_object"]["pairs"] == 8
 
 
 def test_the_demonstrations_screens_pool_each_comparison_over_e1_to_e3():

@@ -136,8 +136,10 @@ class Results:
         return pools
 
     def set_pools(self) -> dict[str, list[str]]:
-        """Each configuration with `pool_sets`, with the configurations it lists: `{target: [target, *listed]}`."""
-        return {name: [name, *c["pool_sets"]] for name, c in self.configs.items() if c.get("pool_sets")}
+        """Each configuration with `pool_sets`, with the configurations it lists that were planned or recorded:
+        `{target: [target, *listed]}`."""
+        return {name: [name, *(n for n in c["pool_sets"] if n in self.configs)]
+                for name, c in self.configs.items() if c.get("pool_sets")}
 
     def of_group(self, group: str) -> list[str]:
         return [name for name, c in self.configs.items() if c.get("group") == group]
