@@ -109,7 +109,9 @@ class Runner(Training, Evaluation):
         finished and evaluable."""
         self.write_plan(self.sweep.runs(configs), configs)
         units = self.shard_units(configs, shard)
-        outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": [], "trained": []}
+        outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": []}
+        if train_only:
+            outcome["trained"] = []
         bar = tqdm(total=sum(len(r) for _, r in units), desc=f"sweep shard {shard[0]}/{shard[1]}", disable=not progress)
         for (trained, suite, seed), unit_runs in units:
             pending = [r for r in unit_runs if not self.is_recorded(r)]
