@@ -293,3 +293,20 @@ def test_acting_from_python_runs_as_written_without_a_device_warning():
     printed = [line for line in result.stdout.splitlines() if "torch.Size" in line]
     assert printed == [f"{step} torch.Size([1, 7])" for step in range(3)], result.stdout
     assert "is not available" not in result.stderr, result.stderr[-3000:]
+
+
+def test_a_model_trained_without_evaluation_names_its_processes_from_its_training_record(tmp_path):
+    """`training_command` finds the training record (at any depth under results/) of the sweep training that published
+    a checkpoint, so the card of a `--train-only` model counts its DDP processes; other checkpoints get None."""
+    from lerobot_predvla.hub.card import training_command, training_processes
+
+    checkpoint = tmp_path / "checkpoints" / "screen" / "d3" / "table2_seed0"
+    checkpoint.mkdir(parents=True)
+    train = tmp_path / "results" / "screen" / "d3" / "runs" / "train" / "table2" / "libero_object" / "seed0"
+    train.mkdir(parents=True)
+    command = ["torchrun", "--nproc_per_node=2", "lerobot-train", "--batch_size=16"]
+    (train / "predvla_sweep_train.json").write_text(json.dumps(
+        {"checkpoint": "../../../../checkpoints/screen/d3/table2_seed0", "command": command}))
+    assert training_command(checkpoint, tmp_path / "results") == command
+    assert training_processes(command) == 2
+    assert training_command(tmp_path / "checkpoints" / "other", tmp_path / "results") is None

@@ -30,6 +30,7 @@ from lerobot_predvla.sims.libero.protocol import (
     PAPER_EPISODES_PER_TASK,
     PAPER_OBJECT,
 )
+from lerobot_predvla.utils.checkpoints import TRAIN_DONE_FILE
 from lerobot_predvla.utils.manifest import sha256_file
 from lerobot_predvla.utils.parameters import count_parameters
 from lerobot_predvla.utils.versions import package_version
@@ -209,6 +210,17 @@ def training_processes(command: list[str]) -> int:
     return int(value) if value else 1
 
 
+def training_command(checkpoint: Path, results_root: Path) -> list[str] | None:
+    """The `lerobot-train` command of the `predvla sweep` training that published `checkpoint`, from its training
+    record (`runs/train/<config>/<suite>/seed<k>/predvla_sweep_train.json` under `results_root`), or None."""
+    checkpoint = Path(checkpoint).resolve()
+    for path in sorted(Path(results_root).glob(f"**/runs/train/*/*/seed*/{TRAIN_DONE_FILE}")):
+        record = json.loads(path.read_text())
+        if record.get("checkpoint") and (path.parents[4] / record["checkpoint"]).resolve() == checkpoint:
+            return record.get("command")
+    return None
+
+
 def evaluation_records(checkpoint: Path, results_root: Path) -> list[dict]:
     """The `predvla sweep` run records under `results_root/*/runs/records/` that evaluated `checkpoint`: those whose
     `checkpoint` is this directory, those whose training (job name, dataset and seed) is the one its
@@ -220,7 +232,7 @@ def evaluation_records(checkpoint: Path, results_root: Path) -> list[dict]:
     weights = checkpoint / "model.safetensors"
     weights_sha256 = sha256_file(weights) if weights.is_file() else None
     found = []
-    for path in sorted(Path(results_root).glob("*/runs/records/*/*/seed*.json")):
+    for path in sorted(Path(results_root).glob("**/runs/records/*/*/seed*.json")):
         record = json.loads(path.read_text())
         runs_dir = path.parents[3]
         recorded = record.get("checkpoint")
@@ -295,7 +307,7 @@ def _format_fit(fit: dict) -> str:
 
 
 def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None, config: dict,
-                      records: list[dict] | None) -> str:
+                      records: list[dict] | None, train_command: list[str] | None = None) -> str:
     lines = []
     if dataset is not None:
         tasks = "; ".join(dataset.tasks[:12]) + ("; ..." if len(dataset.tasks) > 12 else "")
@@ -315,7 +327,8 @@ def _training_section(dataset: DatasetSummary | None, train_cfg: dict | None, co
     trained = [r for r in records or [] if (r.get("commands") or {}).get("train")]
     if train_cfg is not None:
         steps = trained[0]["steps"] if trained else train_cfg["steps"]
-        processes = training_processes(trained[0]["commands"]["train"]) if trained else 1
+        command = trained[0]["commands"]["train"] if trained else train_command
+        processes = training_processes(command) if command else 1
         batch = f"batch size {train_cfg['batch_size']}" + (
             f" per process, {processes} processes ({train_cfg['batch_size'] * processes} per step)"
             if processes > 1 else "")
@@ -500,11 +513,13 @@ def render_card(
     report: str | None = None,
     records: list[dict] | None = None,
     baselines: list[dict] | None = None,
+    train_command: list[str] | None = None,
 ) -> str:
     """The model card for the files about to be published, with every value filled in. `repo_id` is where a reader
     loads it from (a Hub repo, or a directory of this repository); `report`: a `predvla report` table
     (`report_results`); `records`: its evaluations (`evaluation_records`), shown instead of a report's table, and
-    `baselines` the BC runs beside them (`baseline_records`)."""
+    `baselines` the BC runs beside them (`baseline_records`); `train_command`: its training's command when no record
+    carries one (`training_command`: a model trained with `predvla sweep --train-only`, not evaluated yet)."""
     config = read_json(files, "config.json")
     train_cfg = read_json(files, "train_config.json") if "train_config.json" in files else None
     dataset_repo_id = dataset.repo_id if dataset else (train_cfg["dataset"]["repo_id"] if train_cfg else "unknown")
@@ -535,7 +550,7 @@ def render_card(
             for key, ft in features.items()
         ),
         "frontend_section": frontend_section,
-        "training_section": _training_section(dataset, train_cfg, config, records),
+        "training_section": _training_section(dataset, train_cfg, config, records, train_command),
         "config_rows": "\n".join(
             f"| `{k}` | {_format_value(config[k])}{PAPER_ONLY_NOTE if k in PAPER_ONLY_FIELDS else ''} |"
             for k in own_fields if k in config),

@@ -35,6 +35,7 @@ from lerobot_predvla.hub.card import (
     evaluation_records,
     read_json,
     render_card,
+    training_command,
 )
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 from lerobot_predvla.utils.checkpoints import REQUIRED_FILES, find_pretrained
@@ -166,7 +167,8 @@ def repository_files(checkpoint: Path, root: Path) -> dict[str, bytes]:
     files = without_machine_paths(publishable_files(checkpoint))
     records = evaluation_records(checkpoint, root / "results")
     card = render_card(files, checkpoint.relative_to(root).as_posix(), records=records,
-                       baselines=baseline_records(records, root / "results"))
+                       baselines=baseline_records(records, root / "results"),
+                       train_command=training_command(checkpoint, root / "results"))
     return {**{rel: src for rel, src in files.items() if isinstance(src, bytes)}, CARD_FILE: card.encode()}
 
 

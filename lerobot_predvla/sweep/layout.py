@@ -10,11 +10,12 @@
 
 from pathlib import Path
 
+from lerobot_predvla.utils.checkpoints import TRAIN_DONE_FILE  # noqa: F401  (part of the runs directory layout)
+
 PLAN_FILE = "plan.json"
 RECORDS_DIR = "records"
 TRAIN_DIR = "train"
 DATA_DIR = "data"
-TRAIN_DONE_FILE = "predvla_sweep_train.json"  # written beside a finished training's checkpoints
 EVAL_WALL_FILE = "predvla_sweep_eval.json"  # wall time of one evaluation part, beside its eval_info.json
 
 

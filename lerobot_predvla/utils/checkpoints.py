@@ -27,6 +27,10 @@ from lerobot.utils.constants import CHECKPOINTS_DIR, LAST_CHECKPOINT_LINK, PRETR
 
 from lerobot_predvla.utils.manifest import write_manifest
 
+# Written by `predvla sweep` beside a finished training's checkpoints: its training record (command, steps, the
+# published model), which model cards read.
+TRAIN_DONE_FILE = "predvla_sweep_train.json"
+
 REQUIRED_FILES = ("config.json", "model.safetensors")  # what makes a directory a saved policy
 KILL_AT_ENV = "PREDVLA_KILL_AT"
 # Named moments of a checkpoint write, in order: inside LeRobot's write (the weights written, the training
