@@ -95,6 +95,9 @@ def test_predvla_trace_records_error_regression_in_the_simulator(checkpoint, tmp
         assert np.isfinite(episode["action"]).all() and np.shape(episode["action"]) == (EPISODE_STEPS, 7)
         moves = np.array(episode["move_newest"])
         assert moves.shape == (EPISODE_STEPS, 4) and np.isfinite(moves).all() and (moves > 0).any()
+        assert np.shape(episode["error_before"]) == (EPISODE_STEPS, 2) and np.isfinite(episode["error_before"]).all()
+    assert set(trace["correlations"]) == {"vision", "proprio", "median_after_over_before"}
+    assert (tmp_path / "er" / "corrections.png").stat().st_size > 0
 
     log = run([predvla, "trace", "--episode", "1", "--compare", str(tmp_path / "er"), str(tmp_path / "open_loop"),
                *eval_args, "--policy.er_iterations=0"])

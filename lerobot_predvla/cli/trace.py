@@ -3,7 +3,10 @@
 Every argument after OUT goes to lerobot-eval unchanged (its `--output_dir` defaults to OUT/eval). Writes
 OUT/trace.json (the lerobot-eval arguments, OMP_NUM_THREADS as set or null, and, per episode in lerobot-eval's
 order, per control step: the action, the prior chain's action and how far error regression moved each module's
-posteriors) and OUT/trace.png (episode --episode of this run, beside the same episode of every --compare trace).
+posteriors, with the prediction errors the step observed before and after its iterations) and OUT/trace.png (episode
+--episode of this run, beside the same episode of every --compare trace). With error regression it also writes
+OUT/corrections.png (each module's move against the prediction error observed before the step, every step of every
+episode, succeeded and failed episodes apart) and trace.json's `correlations` (Spearman per module and error).
 lerobot-eval steps every environment of a batch until the last one ends, so an episode's trace runs past its own
 end; eval_info.json in the output directory says which episodes succeeded. Example (seed 1 against seed 0 of
 the same recipe, one reset):
@@ -22,11 +25,13 @@ import sys
 from pathlib import Path
 
 from lerobot_predvla.policies.predvla.error_regression import ErrorRegression
-from lerobot_predvla.policies.predvla.trace import TraceRecorder, plot_traces
+from lerobot_predvla.policies.predvla.trace import TraceRecorder, correlations, plot_corrections, plot_traces
+from lerobot_predvla.sweep.eval_info import EVAL_INFO_FILE, EvalInfoError, episode_successes
 from lerobot_predvla.utils.io import atomic_write_json
 
 TRACE_FILE = "trace.json"
 FIGURE_FILE = "trace.png"
+CORRECTIONS_FILE = "corrections.png"
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -86,13 +91,34 @@ def run(args: argparse.Namespace) -> int:
         return 2
     # the thread count is part of the run: error regression's outcomes can turn on how its sums are rounded
     trace = {"eval_args": eval_args, "omp_num_threads": os.environ.get("OMP_NUM_THREADS"), "episodes": episodes}
+    traced_er = any("error_before" in ep for ep in episodes)
+    if traced_er:
+        trace["correlations"] = correlations(episodes)
     args.out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(args.out / TRACE_FILE, trace)
+    if traced_er:
+        succeeded = run_successes(eval_args, len(episodes))
+        plot_corrections(episodes, succeeded, args.out / CORRECTIONS_FILE,
+                         f"{args.out.name}: posterior moves against the observed prediction error")
     if args.episode >= len(episodes):
         print(f"predvla trace: error: --episode {args.episode}, but lerobot-eval ran {len(episodes)} episodes "
               f"({args.out / TRACE_FILE} is written, no figure)", file=sys.stderr)
         return 2
     plot_traces({args.out.name: trace, **compared}, args.episode, args.out / FIGURE_FILE)
+    written = [args.out / TRACE_FILE, args.out / FIGURE_FILE] + ([args.out / CORRECTIONS_FILE] if traced_er else [])
     print(f"predvla trace: {len(episodes)} episodes, up to {max(len(e['steps']) for e in episodes)} steps; "
-          f"{args.out / TRACE_FILE}, {args.out / FIGURE_FILE}")
+          + ", ".join(map(str, written)))
     return 0
+
+
+def run_successes(eval_args: list[str], n_episodes: int) -> list[bool] | None:
+    """Success of each traced episode from the run's eval_info.json (tasks in lerobot-eval's order, ascending
+    ids), or None when it cannot be read or does not hold exactly the traced episodes."""
+    output_dir = next((a.split("=", 1)[1] for a in eval_args if a.startswith("--output_dir=")), None)
+    if output_dir is None:
+        return None
+    try:
+        successes = [ok for task in episode_successes(Path(output_dir) / EVAL_INFO_FILE).values() for ok in task]
+    except EvalInfoError:
+        return None
+    return successes if len(successes) == n_episodes else None
