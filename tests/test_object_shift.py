@@ -54,6 +54,11 @@ def test_bad_shift_settings_name_their_flag(kwargs, flag):
 def test_shift_needs_the_official_init_states():
     with pytest.raises(ValueError, match="init_states=true"):
         PredVLALiberoEnv(task="libero_object", object_shift_cm=2, init_states=False)
+    # the same check the simulator env makes when built directly (SparseRenderLiberoEnv)
+    with pytest.raises(ValueError, match="init_states=true"):
+        ShiftSpec(target_cm=1).check_init_states(False)
+    ShiftSpec(object_cm=2).check_init_states(True)
+    ShiftSpec().check_init_states(False)  # no shift asked for: nothing to check
 
 
 def test_object_to_pick_is_the_first_in_or_on_predicate_in_the_experts_order():

@@ -147,9 +147,7 @@ class PredVLALiberoEnv(LiberoEnv):
         self.fault_injection()  # validates fault_rate and fault_mode
         check_placement(self.placement_spread_cm, self.init_states, self.shift().active)
         self.instructions()  # validates the instruction flags (their range per suite when the envs are made)
-        if self.shift().active and not self.init_states:
-            raise ValueError("--env.object_shift_cm / --env.target_shift_cm move objects from the official init "
-                             "states: they need --env.init_states=true.")
+        self.shift().check_init_states(self.init_states)
 
     def shift(self) -> ShiftSpec:
         """The shift of `--env.object_shift_*` (validated here)."""

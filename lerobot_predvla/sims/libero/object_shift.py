@@ -70,6 +70,12 @@ class ShiftSpec:
     def active(self) -> bool:
         return self.object_cm > 0 or self.target_cm > 0
 
+    def check_init_states(self, init_states: bool) -> None:
+        """ValueError naming the flags when a shift is asked for without the official init states it starts from."""
+        if self.active and not init_states:
+            raise ValueError("--env.object_shift_cm / --env.target_shift_cm move objects from the official init "
+                             "states: they need --env.init_states=true.")
+
     def direction_degrees(self, episode: int) -> float:
         """Direction (degrees from +x towards +y) of the object's shift in episode `episode`."""
         if self.pattern == "cross":

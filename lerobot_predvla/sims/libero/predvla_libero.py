@@ -228,9 +228,8 @@ class SparseRenderLiberoEnv(LiberoEnv):
         }
         shifting = shift is not None and shift.active
         check_placement(placement_spread_cm, self.init_states, shifting)
-        if shifting and not self.init_states:
-            raise ValueError("--env.object_shift_cm / --env.target_shift_cm move objects from the official init "
-                             "states: they need --env.init_states=true.")
+        if shifting:
+            shift.check_init_states(self.init_states)
         self.shifts = ShiftedResets(shift) if shifting else None
         self.placements = PlacedResets(placement_spread_cm) if placement_spread_cm > 0 else None
         self.shift_records: list[dict] = []
