@@ -149,3 +149,24 @@ def test_libero_goal_is_one_scene_and_a_plan_is_judged_by_the_evaluated_tasks_go
     before = blind_replay_cross.evaluated_path(out, SUITE, 1).read_bytes()
     assert predvla_main(args) == 0  # finished: nothing runs again
     assert blind_replay_cross.evaluated_path(out, SUITE, 1).read_bytes() == before
+
+
+def test_the_report_command_names_the_suites_and_tasks_its_folder_holds(tmp_path):
+    """report.md's "Reproduce" line repeats the run that wrote OUT, not a run of every task."""
+    args = build_parser().parse_args(["blind-replay", "--suites", "libero_object", "--tasks", "2,3,6",
+                                      "--resets-seed", "3000", "--episodes", "10", "--out", str(tmp_path)])
+    for task in (2, 3, 6):
+        path = blind_replay.task_path(tmp_path, "libero_object", task)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("{}")
+    command = cli.command_for_report(args)
+    assert command.startswith("predvla blind-replay --suites libero_object --tasks 2,3,6 ")
+    assert "--resets-seed 3000 --episodes 10" in command
+    for task in range(10):  # the whole suite held: no --tasks
+        blind_replay.task_path(tmp_path, "libero_object", task).write_text("{}")
+    assert "--tasks" not in cli.command_for_report(args) and "--suites libero_object" in cli.command_for_report(args)
+    path = blind_replay.task_path(tmp_path, "libero_goal", 0)  # another suite with other tasks: one line per suite
+    path.parent.mkdir(parents=True)
+    path.write_text("{}")
+    lines = cli.command_for_report(args).splitlines()
+    assert len(lines) == 2 and "--suites libero_goal --tasks 0 " in lines[1] and "--tasks" not in lines[0]

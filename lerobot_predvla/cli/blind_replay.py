@@ -301,12 +301,21 @@ def run(args: argparse.Namespace) -> int:
 
 
 def command_for_report(args: argparse.Namespace) -> str:
-    """The command that reproduces the whole report: every suite, every task, under these settings (with
-    --cross-task: the suites and tasks asked for)."""
+    """The command (one line per suite where their tasks differ) that reproduces the report as it stands: the
+    suites and tasks OUT holds, under these settings (with --cross-task: the suites and tasks asked for)."""
     if args.cross_task is not None:
         return command_line(args)
-    full = argparse.Namespace(**{**vars(args), "suites": list(SUITES), "tasks": None})
-    return command_line(full)
+    held = {suite: sorted(int(p.stem.removeprefix("task")) for p in (args.out / TASKS_DIR / suite).glob("task*.json"))
+            for suite in SUITES}
+    held = {suite: tasks for suite, tasks in held.items() if tasks}
+    if not held:
+        held = {suite: list(range(num_tasks(suite))) for suite in args.suites}
+    whole = {suite: None if tasks == list(range(num_tasks(suite))) else tasks for suite, tasks in held.items()}
+    if len(set(map(str, whole.values()))) == 1:  # one --tasks (or none) fits every suite held
+        return command_line(argparse.Namespace(**{**vars(args), "suites": list(whole),
+                                                  "tasks": next(iter(whole.values()))}))
+    return "\n".join(command_line(argparse.Namespace(**{**vars(args), "suites": [suite], "tasks": tasks}))
+                     for suite, tasks in whole.items())
 
 
 def expected_all() -> dict[str, int]:
