@@ -115,7 +115,7 @@ def correction_points(episodes: list[dict]) -> dict[str, tuple[list[float], list
 def correlations(episodes: list[dict]) -> dict[str, dict[str, float | None]]:
     """Spearman's rank correlation of each module's move with each prediction error observed before the step
     (None with fewer than three steps or a constant series), and the median ratio of each error after the
-    iterations to before them (`<name>_after_over_before`)."""
+    iterations to before them (`median_after_over_before`: {error name: ratio})."""
     out: dict[str, dict[str, float | None]] = {}
     for name, (errors, moves) in correction_points(episodes).items():
         row: dict[str, float | None] = {}
@@ -148,8 +148,9 @@ def plot_corrections(episodes: list[dict], succeeded: list[bool] | None, path: P
         "failed": [ep for ep, ok in zip(episodes, succeeded, strict=False) if not ok]}
     fig, axes = plt.subplots(len(ERROR_NAMES), len(MODULE_NAMES), figsize=(12, 5.5), squeeze=False)
     for label, group in groups.items():
+        points = correction_points(group)
         for row, name in enumerate(ERROR_NAMES):
-            errors, moves = correction_points(group)[name]
+            errors, moves = points[name]
             for k, ax in enumerate(axes[row]):
                 ax.scatter(errors, [m[k] for m in moves], s=3, alpha=0.3, label=label)
     for row, name in enumerate(ERROR_NAMES):
