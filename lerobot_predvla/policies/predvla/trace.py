@@ -23,16 +23,16 @@ from lerobot_predvla.utils.io import atomic_save_figure
 
 from .configuration_predvla import MODULE_NAMES
 from .error_regression import ErrorRegression
+from .predictive_model import Trajectory
 
 TRACED_KEYS = ("action", "prior_action", "move_newest", "move_window", "error_before", "error_after",
                "vision_weight")
 ERROR_NAMES = ("vision", "proprio")  # the two prediction errors of Eq. 7, in the order `newest_errors` gives them
 
 
-def newest_errors(er: ErrorRegression, c_q: Tensor) -> list[list[float]]:
-    """[eps_v, eps_q] (Eq. 7) of the window's newest step per environment, the window regenerated from c_q."""
+def newest_errors(er: ErrorRegression, traj: Trajectory) -> list[list[float]]:
+    """[eps_v, eps_q] (Eq. 7) of the window's newest step per environment, on the window regenerated as `traj`."""
     with torch.no_grad():
-        traj = er.rollout(er.start_state, er.lang_term, c_q)
         eps_v, eps_q = er.model.prediction_errors(traj, torch.stack(er.vision), torch.stack(er.proprio))
     return torch.stack([eps_v[-1], eps_q[-1]], dim=-1).tolist()
 
@@ -52,8 +52,10 @@ class TraceRecorder:
             move = change.unflatten(-1, (len(MODULE_NAMES), -1)).norm(dim=-1)  # (window, batch, modules)
             record["move_newest"] = move[-1].tolist()
             record["move_window"] = move.mean(0).tolist()
-            record["error_before"] = newest_errors(er, before)
-            record["error_after"] = newest_errors(er, torch.stack(er.posteriors))
+            with torch.no_grad():
+                window_before = er.rollout(er.start_state, er.lang_term, before)
+            record["error_before"] = newest_errors(er, window_before)
+            record["error_after"] = newest_errors(er, er.trajectory)  # the window `act` regenerated
             record["vision_weight"] = er.vision_weight[-1].tolist()
         self.batches[-1].append(record)
 
@@ -96,19 +98,21 @@ def plot_traces(traces: dict[str, dict], episode: int, path: Path) -> None:
     plt.close(fig)
 
 
-def correction_points(episodes: list[dict]) -> dict[str, tuple[list[float], list[list[float]]]]:
-    """Per prediction error ("vision": fresh frames only, "proprio"), its value before each traced step's
-    iterations and the newest posterior's move per module at that step, over all episodes."""
-    points: dict[str, tuple[list[float], list[list[float]]]] = {name: ([], []) for name in ERROR_NAMES}
+def correction_points(episodes: list[dict]) -> dict[str, tuple[list[float], list[float], list[list[float]]]]:
+    """Per prediction error ("vision": fresh frames only, "proprio"), over every traced step of all episodes: its
+    value before the step's iterations, its value after them, and the newest posterior's move per module."""
+    points: dict[str, tuple[list[float], list[float], list[list[float]]]] = {name: ([], [], []) for name in ERROR_NAMES}
     for ep in episodes:
         if "error_before" not in ep:
             continue
-        for errors, moves, weight in zip(ep["error_before"], ep["move_newest"], ep["vision_weight"], strict=True):
+        for before, after, moves, weight in zip(ep["error_before"], ep["error_after"], ep["move_newest"],
+                                                ep["vision_weight"], strict=True):
             for k, name in enumerate(ERROR_NAMES):
                 if name == "vision" and weight == 0:
                     continue  # a stale frame: its error does not enter the free energy
-                points[name][0].append(errors[k])
-                points[name][1].append(moves)
+                points[name][0].append(before[k])
+                points[name][1].append(after[k])
+                points[name][2].append(moves)
     return points
 
 
@@ -117,21 +121,17 @@ def correlations(episodes: list[dict]) -> dict[str, dict[str, float | None]]:
     (None with fewer than three steps or a constant series), and the median ratio of each error after the
     iterations to before them (`median_after_over_before`: {error name: ratio})."""
     out: dict[str, dict[str, float | None]] = {}
-    for name, (errors, moves) in correction_points(episodes).items():
+    medians: dict[str, float | None] = {}
+    for name, (errors, after, moves) in correction_points(episodes).items():
         row: dict[str, float | None] = {}
         for k, module in enumerate(MODULE_NAMES):
             series = [m[k] for m in moves]
             defined = len(errors) >= 3 and len(set(errors)) > 1 and len(set(series)) > 1
             row[module] = round(float(spearmanr(errors, series).statistic), 4) if defined else None
         out[name] = row
-    for k, name in enumerate(ERROR_NAMES):
-        ratios = sorted(after[k] / before[k] for ep in episodes if "error_before" in ep
-                        for before, after, weight in zip(ep["error_before"], ep["error_after"], ep["vision_weight"],
-                                                         strict=True)
-                        if before[k] > 0 and (name != "vision" or weight != 0))
-        out.setdefault("median_after_over_before", {})[name] = (
-            round(ratios[len(ratios) // 2], 4) if ratios else None)
-    return out
+        ratios = sorted(a / b for b, a in zip(errors, after, strict=True) if b > 0)
+        medians[name] = round(ratios[len(ratios) // 2], 4) if ratios else None
+    return {**out, "median_after_over_before": medians}
 
 
 def plot_corrections(episodes: list[dict], succeeded: list[bool] | None, path: Path, title: str) -> None:
@@ -150,7 +150,7 @@ def plot_corrections(episodes: list[dict], succeeded: list[bool] | None, path: P
     for label, group in groups.items():
         points = correction_points(group)
         for row, name in enumerate(ERROR_NAMES):
-            errors, moves = points[name]
+            errors, _, moves = points[name]
             for k, ax in enumerate(axes[row]):
                 ax.scatter(errors, [m[k] for m in moves], s=3, alpha=0.3, label=label)
     for row, name in enumerate(ERROR_NAMES):
