@@ -383,13 +383,15 @@ def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
         s1, n1 = totals(tasks, NEAREST_MEAN_KEY)
         lines += [f"## {suite}", "",
                   f"{starts_words(first)}, {first['cap']}-step cap. "
-                  f"Plan from state 0: **{s0}/{n0} ({_pct(s0, n0)})**; plan from the nearest-mean state: "
+                  f"Plan from state {first['source_state']}: **{s0}/{n0} ({_pct(s0, n0)})**; plan from the "
+                  "nearest-mean state: "
                   f"**{s1}/{n1} ({_pct(s1, n1)})**. Wall time {sum(t['seconds'] for t in tasks.values()) / 60:.0f} "
                   "min (one process, physics only).", ""]
         missing = expected_tasks.get(suite, 0) - len(tasks)
         if missing > 0:
             lines += [f"{missing} of {expected_tasks[suite]} tasks not run yet.", ""]
-        lines += ["| task | plan from state 0: successes | its steps | expert / own start | nearest-mean source "
+        lines += [f"| task | plan from state {first['source_state']}: successes | its steps | expert / own start | "
+                  "nearest-mean source "
                   "state | its plan: successes | its steps | expert / own start | wall time (s) | name |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         for task_id, t in tasks.items():
