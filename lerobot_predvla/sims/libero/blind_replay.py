@@ -8,7 +8,7 @@ any step, and ends there (as LIBERO's evaluation episodes do). What it measures 
 can get on these starts: a lower bound, as one plan is one choice among many.
 
 Two plans per task, both chosen before any outcome is seen:
-- `state0`: the plan from official init state 0 (`--source-state`);
+- `state0`: the plan from official init state `--source-state` (default 0);
 - `nearest_mean`: the plan from the official init state whose object placements (x, y of every movable object after
   `set_init_state`) are nearest, in Euclidean distance over all of them, to their mean over the task's official init
   states. It is replayed on the same replay states, less its own source state if that is one of them (then one
@@ -361,6 +361,11 @@ def starts_words(entry: dict) -> str:
             f"` (reset seeds {seeds})")
 
 
+def source_plan_words(entry: dict) -> str:
+    """The report's name for the plan from `--source-state` (`entry`: any task entry of the report)."""
+    return f"plan from state {entry['source_state']}"
+
+
 def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
     entry = next(iter(next(iter(report.values())).values()))
     if entry.get("starts", "official") == "official":
@@ -373,7 +378,8 @@ def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
              f"action with no observation on {where} the settle steps, the "
              "plan, then idle steps (arm still, gripper open) up to the step cap; success is LIBERO's "
              "`check_success()` after any step. Two plans per task, both chosen before any outcome: from official "
-             "init state 0, and from the official init state whose object placements are nearest their mean over "
+             f"init state {entry['source_state']}, and from the official init state whose object placements are "
+             "nearest their mean over "
              "the task's 50 official init states (that plan is not replayed on its own source state: one episode "
              "fewer where its source is a replay state). *Own start* is each plan replayed on its source state "
              "(must succeed wherever the expert did).", command)
@@ -383,14 +389,14 @@ def markdown(report: dict, command: str, expected_tasks: dict[str, int]) -> str:
         s1, n1 = totals(tasks, NEAREST_MEAN_KEY)
         lines += [f"## {suite}", "",
                   f"{starts_words(first)}, {first['cap']}-step cap. "
-                  f"Plan from state {first['source_state']}: **{s0}/{n0} ({_pct(s0, n0)})**; plan from the "
+                  f"{source_plan_words(first).capitalize()}: **{s0}/{n0} ({_pct(s0, n0)})**; plan from the "
                   "nearest-mean state: "
                   f"**{s1}/{n1} ({_pct(s1, n1)})**. Wall time {sum(t['seconds'] for t in tasks.values()) / 60:.0f} "
                   "min (one process, physics only).", ""]
         missing = expected_tasks.get(suite, 0) - len(tasks)
         if missing > 0:
             lines += [f"{missing} of {expected_tasks[suite]} tasks not run yet.", ""]
-        lines += [f"| task | plan from state {first['source_state']}: successes | its steps | expert / own start | "
+        lines += [f"| task | {source_plan_words(first)}: successes | its steps | expert / own start | "
                   "nearest-mean source "
                   "state | its plan: successes | its steps | expert / own start | wall time (s) | name |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
@@ -425,13 +431,14 @@ def figure(report: dict, path: Path) -> None:
     for ax, suite in zip(axes[:, 0], suites, strict=True):
         tasks = report[suite]
         x = np.arange(len(tasks))
-        for offset, key, label in ((-0.2, None, "plan from state 0"), (0.2, NEAREST_MEAN_KEY,
-                                                                       "plan from the nearest-mean state")):
+        source_plan = source_plan_words(next(iter(tasks.values())))
+        for offset, key, label in ((-0.2, None, source_plan), (0.2, NEAREST_MEAN_KEY,
+                                                               "plan from the nearest-mean state")):
             rows = [t if key is None else t[key] for t in tasks.values()]
             ax.bar(x + offset, [100 * r["successes"] / max(r["episodes"], 1) for r in rows], width=0.4, label=label)
         s0, n0 = totals(tasks)
         s1, n1 = totals(tasks, NEAREST_MEAN_KEY)
-        ax.set_title(f"{suite}: plan from state 0 {_pct(s0, n0)} ({s0}/{n0}), from the nearest-mean state "
+        ax.set_title(f"{suite}: {source_plan} {_pct(s0, n0)} ({s0}/{n0}), from the nearest-mean state "
                      f"{_pct(s1, n1)} ({s1}/{n1})", fontsize=10)
         ax.set_xticks(x, list(tasks))
         ax.set_xlim(-0.6, max(len(tasks), 10) - 0.4)
