@@ -170,16 +170,60 @@ def test_a_row_without_baselines_shows_those_of_the_row_with_its_demonstrations(
         update_docs(tmp_path)
 
 
+def test_a_row_of_teleop_demonstrations_names_its_data_its_tasks_and_its_own_blind_replay(tmp_path):
+    """The teleoperator model's demonstrations with varied placements get rows of their own: the dataset, the three
+    screened tasks as a departure, and one of its demonstrations replayed blind on the same official init states
+    (states 1-9 and the plan's own start, state 0), which must be the starts the row's cells ran from."""
+    shutil.copytree(REPO / "configs", tmp_path / "configs")
+    blind = Path("results/demonstrations/blind_replay/E1_teleop/report.json")
+    (tmp_path / blind).parent.mkdir(parents=True)
+    shutil.copy(REPO / blind, tmp_path / blind)
+    tasks = json.loads((REPO / blind).read_text())["libero_object"]
+    replayed = sum(t["successes"] + t["source_replay_success"] for t in tasks.values())
+    results = tmp_path / "results/demonstrations/teleop_placed"
+    runs = {"olt": (4, 5, 6), "olt_open_loop": (5, 5, 6), "B1": (9, 9, 8), "B2": (7, 9, 8)}
+
+    def write(episodes_per_task: int) -> None:
+        configs = {}
+        for config, successes in runs.items():
+            record = {**_record(config, 0, sum(successes), 3 * episodes_per_task),
+                      "n_episodes_per_task": episodes_per_task, "eval_tasks": [2, 3, 6],
+                      "tasks": {str(t): {"successes": s, "episodes": episodes_per_task}
+                                for t, s in zip((2, 3, 6), successes, strict=True)}}
+            atomic_write_json(results / f"runs/records/{config}/libero_object/seed0.json", record)
+            configs[config] = {"suites": {"libero_object": {"seeds": {"0": 100 * sum(successes) / 30}}}}
+        atomic_write_json(results / "report.json", {"configs": configs})
+
+    write(10)
+    (tmp_path / "docs").mkdir()
+    for name in (README, RESULTS_DOC):
+        (tmp_path / name).write_text(f"intro\n{HEADLINE_START}\n{HEADLINE_END}\nend\n")
+    update_docs(tmp_path)
+    readme = _block(tmp_path / README)
+    row = next(line for line in readme.splitlines() if line.startswith("| 1. ["))
+    assert ("50 teleoperator-model demonstrations per task (diversity 1), placements varied by 3 cm, arm start "
+            "noise, one wrist branch") in row
+    assert f"replayed blind on the same starts: {100 * replayed / 30:.1f} ({replayed}/30)" in row
+    assert "| 50.0 (n = 1) | 53.3 (n = 1) | 80.0 (n = 1) | 86.7 (n = 1) |" in row
+    assert "| evaluation tasks | 2, 3, 6 | all |" in readme
+    assert "objects moved from LIBERO's placements by 3 cm (std per axis)" in readme
+    write(20)  # official init states 0-19: not the starts the blind replay ran on
+    with pytest.raises(ReportError, match=r"E1_teleop/report.json: replays tasks \[2, 3, 6\] on states"):
+        update_docs(tmp_path)
+
+
 def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys):
     shutil.copytree(REPO / "configs", tmp_path / "configs")
     for exp in {e.results for e in EXPERIMENTS}:
         if (REPO / "results" / exp / "report.json").is_file():
             shutil.copytree(REPO / "results" / exp / "runs/records", tmp_path / "results" / exp / "runs/records")
             shutil.copy(REPO / "results" / exp / "report.json", tmp_path / "results" / exp / "report.json")
-    blind = Path("results/blind_replay/report.json")  # the reference row (`predvla blind-replay`)
-    if (REPO / blind).is_file():
-        (tmp_path / blind).parent.mkdir(parents=True)
-        shutil.copy(REPO / blind, tmp_path / blind)
+    # the reference row (`predvla blind-replay`) and the rows' own blind replays
+    for blind in {Path("results/blind_replay"), *(Path("results") / e.blind_replay for e in EXPERIMENTS
+                                                   if e.blind_replay)}:
+        if (REPO / blind / "report.json").is_file():
+            (tmp_path / blind).mkdir(parents=True, exist_ok=True)
+            shutil.copy(REPO / blind / "report.json", tmp_path / blind / "report.json")
     (tmp_path / "docs").mkdir()
     shutil.copy(REPO / README, tmp_path / README)
     shutil.copy(REPO / RESULTS_DOC, tmp_path / RESULTS_DOC)

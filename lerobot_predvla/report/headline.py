@@ -29,6 +29,7 @@ from lerobot_predvla.policies.recipe import Departure, config_departures
 from lerobot_predvla.report.formatting import MISSING, fmt_mean_std, fmt_rate, table
 from lerobot_predvla.report.results import SUMMARY_FILE, ReportError, load_summary, run_episodes
 from lerobot_predvla.sims.libero import blind_replay
+from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE
 from lerobot_predvla.sims.libero.protocol import (
     PAPER_EPISODE_LENGTH,
     PAPER_EPISODES_PER_TASK,
@@ -53,8 +54,8 @@ BASELINE_COLUMNS = ("bc_rnn", "bc_transformer")
 # The paper's exact open loop (Table 6, A6) per suite, beside one demonstration replayed blind.
 PAPER_OPEN_LOOP = {"libero_spatial": 73.79, "libero_object": 78.14, "libero_goal": 78.50, "libero_10": 28.00}
 # What each departure from the paper is about, in the order the departures table lists them.
-TOPICS = ("benchmark", "demonstrations", "front end", "training", "evaluation starts", "episodes per task", "step cap",
-          "training seeds")
+TOPICS = ("benchmark", "demonstrations", "front end", "training", "evaluation starts", "evaluation tasks",
+          "episodes per task", "step cap", "training seeds")
 EVERY_ROW = [("benchmark", Departure("libero_object only", "the paper: four suites"))]
 
 
@@ -62,7 +63,10 @@ EVERY_ROW = [("benchmark", Departure("libero_object only", "the paper: four suit
 class Experiment:
     """One headline row: a results directory and the configuration of each column (None: not run there).
     `baselines_from`: another row whose BC columns this row shows, trained on the same demonstrations (the same
-    `data` and `datasets` of its sweep file, checked), when this row's sweep trains no baseline of its own."""
+    `data` and `datasets` of its sweep file, checked), when this row's sweep trains no baseline of its own.
+    `blind_replay`: a `predvla blind-replay` report (a folder under results/) of this row's demonstrations' plan on
+    the official init states its evaluations start from (their tasks and states, checked), shown in the row's label:
+    what replaying one of its own demonstrations without looking gets on the same starts."""
 
     results: str
     sweep: str
@@ -72,6 +76,7 @@ class Experiment:
     bc_rnn: str | None = None
     bc_transformer: str | None = None
     baselines_from: "Experiment | None" = None
+    blind_replay: str | None = None
 
 
 TABLE2 = Experiment("libero_object_table2", "configs/sweeps/libero_object_table2.yaml", "Table 2",
@@ -91,6 +96,12 @@ EXPERIMENTS = (
                "predvla_cpu_8k_lambda_q100_open_loop", "B2", "B1"),
     Experiment("libero_object_cpu_hold", "configs/sweeps/libero_object_cpu_hold.yaml", "CPU recipe, lambda_q = 100",
                "predvla_cpu_lambda_q100", "predvla_cpu_lambda_q100_open_loop"),
+    # The teleoperator model's demonstrations with placements varied by 3 cm (docs/research/demonstrations.md, D3),
+    # screening scale: both PredVLA recipes and the BC baselines trained on them, official init states 0-9 of three
+    # tasks.
+    *(Experiment("demonstrations/teleop_placed", "configs/sweeps/libero_object_demos_teleop_placed.yaml", recipe,
+                 config, f"{config}_open_loop", "B2", "B1", blind_replay="demonstrations/blind_replay/E1_teleop")
+      for recipe, config in (("fit_sensory_olt", "olt"), ("Table 2", "table2"))),
 )
 
 
@@ -123,6 +134,7 @@ class Row:
     cells: dict[str, Cell]
     demonstrations: str
     departures: list[tuple[str, Departure]]
+    blind: tuple[int, int] | None = None  # (successes, episodes) of `experiment.blind_replay` on the same starts
 
 
 def _records(results_dir: Path, config: str) -> dict[int, dict]:
@@ -180,15 +192,24 @@ def _demonstrations(sweep: Sweep) -> tuple[str, list[tuple[str, Departure]]]:
     data = sweep.settings.data.get(SUITE)
     if data is None:
         raise ReportError(f"sweep file: no `data.{SUITE}` section (how the demonstrations were made).")
-    words = [f"{data.per_task} scripted demonstrations per task"]
+    teleop = data.style != DEFAULT_STYLE
+    words = [f"{data.per_task} teleoperator-model demonstrations per task (diversity {data.diversity:g})" if teleop
+             else f"{data.per_task} scripted demonstrations per task"]
+    if data.placement_spread:
+        words.append(f"placements varied by {data.placement_spread:g} cm")
     if data.init_noise:
         words.append("arm start noise")
     if data.half_turn == "wrist_centre":
         words.append("one wrist branch")
     if data.hold_steps:
         words.append(f"{data.hold_steps}-step holds")
-    departures = [("demonstrations", Departure(f"scripted-expert, {data.per_task} per task",
+    made_by = "the scripted expert run by a teleoperator model" if teleop else "scripted-expert"
+    departures = [("demonstrations", Departure(f"{made_by}, {data.per_task} per task",
                                                f"the paper: LIBERO's {PAPER_DEMOS_PER_TASK} human ones"))]
+    if data.placement_spread:
+        departures.append(("demonstrations", Departure(
+            f"objects moved from LIBERO's placements by {data.placement_spread:g} cm (std per axis)",
+            "the paper: LIBERO's placements")))
     if data.vision_weights == "random":
         departures.append(("front end", Departure("a randomly initialised ResNet18", "the paper: ImageNet weights")))
     return ", ".join(words), departures
@@ -201,6 +222,10 @@ def _protocol(cells: dict[str, Cell]) -> list[tuple[str, Departure]]:
     departures = []
     if any(r.get("init_states", True) is False for r in records):
         departures.append(("evaluation starts", Departure("randomised resets", "the paper: the official init states")))
+    tasks = sorted({tuple(r["eval_tasks"]) for r in records if r.get("eval_tasks")})
+    if tasks:
+        departures.append(("evaluation tasks", Departure(" / ".join(", ".join(map(str, t)) for t in tasks),
+                                                         "the paper: all ten")))
     if episodes != [PAPER_EPISODES_PER_TASK]:
         departures.append(("episodes per task", Departure("/".join(map(str, episodes)),
                                                           f"the paper: {PAPER_EPISODES_PER_TASK}")))
@@ -237,6 +262,26 @@ def _baseline_cells(root: Path, exp: Experiment, sweep: Sweep) -> dict[str, Cell
     return {key: _cell(results_dir, summary, getattr(source, key)) for key in BASELINE_COLUMNS}
 
 
+def _row_blind_replay(root: Path, exp: Experiment, cells: dict[str, Cell]) -> tuple[int, int]:
+    """(successes, episodes) of `exp.blind_replay` on the official init states 0..n-1 of the tasks the row's cells
+    ran: its plan replayed on states 1..n-1 and on its own start, state 0; an error naming the report when those are
+    not the row's starts."""
+    folder = Path(root) / "results" / exp.blind_replay
+    report = load_blind_replay(root, folder)
+    path = folder / blind_replay.REPORT_JSON
+    if report is None or SUITE not in report:
+        raise ReportError(f"{path}: no {SUITE} blind replay, which the headline row of results/{exp.results} shows.")
+    tasks = report[SUITE]
+    starts = {int(task_id): sorted([*t["states"], t["source_state"]]) for task_id, t in tasks.items()}
+    for record in (r for cell in cells.values() for r in cell.records.values()):
+        n, wanted = int(record["n_episodes_per_task"]), sorted(map(int, record["tasks"]))
+        if (record.get("init_states", True) is False or sorted(starts) != wanted
+                or any(s != list(range(n)) for s in starts.values())):
+            raise ReportError(f"{path}: replays tasks {sorted(starts)} on states {starts}, not the starts of "
+                              f"{record['config']} (tasks {wanted}, official init states 0-{n - 1}).")
+    return blind_replay.totals_with_source(tasks)
+
+
 def build_rows(root: Path) -> list[Row]:
     """Every row of EXPERIMENTS whose report.json exists under `root/results/`."""
     rows = []
@@ -255,7 +300,8 @@ def build_rows(root: Path) -> list[Row]:
         departures = [*EVERY_ROW, *data_departures,
                       *[("training", d) for d in recipe_departures(sweep, exp.error_regression)],
                       *_protocol(cells)]
-        rows.append(Row(len(rows) + 1, exp, cells, demonstrations, departures))
+        blind = _row_blind_replay(root, exp, cells) if exp.blind_replay else None
+        rows.append(Row(len(rows) + 1, exp, cells, demonstrations, departures, blind))
     if not rows:
         raise ReportError(f"{root}/results: no report.json of {[e.results for e in EXPERIMENTS]}.")
     return rows
@@ -271,8 +317,10 @@ def row_label(row: Row, prefix: str) -> str:
     exp = row.experiment
     baselines = (f"; BC baselines: [{exp.baselines_from.recipe}'s]({prefix}results/{exp.baselines_from.results}/"
                  "report.md), the same demonstrations" if exp.baselines_from else "")
+    blind = (f"; one of its demonstrations replayed blind on the same starts: {fmt_rate(*row.blind)} "
+             f"([report]({prefix}results/{exp.blind_replay}/report.md))" if row.blind else "")
     return (f"{row.number}. [{exp.recipe}]({prefix}docs/glossary.md#recipes); {row.demonstrations} "
-            f"([report]({prefix}results/{exp.results}/report.md){baselines})")
+            f"([report]({prefix}results/{exp.results}/report.md){baselines}){blind}")
 
 
 def summary_table(rows: list[Row], prefix: str, blind: dict | None = None) -> str:
@@ -286,9 +334,10 @@ def summary_table(rows: list[Row], prefix: str, blind: dict | None = None) -> st
 
 
 # ----- the reference row: one demonstration replayed blind (`predvla blind-replay`) ----------------------------
-def load_blind_replay(root: Path) -> dict | None:
-    """results/blind_replay/report.json (suite -> task -> successes, episodes, ...), None when not committed."""
-    path = Path(root) / blind_replay.DEFAULT_OUT / blind_replay.REPORT_JSON
+def load_blind_replay(root: Path, folder: Path | None = None) -> dict | None:
+    """`folder`'s (default results/blind_replay/) report.json (suite -> task -> successes, episodes, ...), None when
+    not committed."""
+    path = (Path(folder) if folder else Path(root) / blind_replay.DEFAULT_OUT) / blind_replay.REPORT_JSON
     if not path.is_file():
         return None
     try:

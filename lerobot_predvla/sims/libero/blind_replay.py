@@ -326,6 +326,13 @@ def totals(tasks: dict[str, dict], key: str | None = None) -> tuple[int, int]:
     return episode_totals(t if key is None else t[key] for t in tasks.values())
 
 
+def totals_with_source(tasks: dict[str, dict]) -> tuple[int, int]:
+    """(successes, episodes) of the state-0 plan on its replay states and on its own start (`source_replay_success`,
+    one episode per task): on official init states 1..n-1 the figure for the starts 0..n-1 an evaluation uses."""
+    successes, episodes = totals(tasks)
+    return successes + sum(bool(t["source_replay_success"]) for t in tasks.values()), episodes + len(tasks)
+
+
 def _pct(successes: int, episodes: int) -> str:
     return f"{percent(successes, episodes):.1f}%" if episodes else "—"
 
