@@ -1,0 +1,161 @@
+"""One dataset's screen of the demonstrations study (docs/research/demonstrations.md) on one page: every policy and
+mode against every evaluation set, beside one of the dataset's demonstrations replayed blind on the same starts.
+
+The study's sweep files name their evaluation cells `<model><mode><set>`: model `olt` (PredVLA `fit_sensory_olt`),
+`table2` (PredVLA Table 2 literal), `B1`, `B2` (the BC baselines); mode `_open_loop` (exact open loop), none (Table
+2's error regression) or `_carried` (error regression with its Adam carried), PredVLA only; set none (E1, official
+init states), `_resets` (E2), `_placed_resets` (E2p) or `_shifted` (E3). The blind-replay folders are
+`<blind>/<set>_<style>` as `predvla blind-replay` wrote them for the protocol; on E1 the plan's replay on its own
+start (state 0) counts as that start's episode, so both figures cover official init states 0-9.
+
+Command (from the repository root):
+
+  python -m research.demonstration_sets --runs results/demonstrations/teleop_placed/runs \\
+      --blind results/demonstrations/blind_replay --style teleop --out results/demonstrations/teleop_placed/sets
+
+Writes OUT/sets.json, OUT/sets.md (successes/episodes per cell; a cell not run is "not run") and OUT/sets.png.
+"""
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+from lerobot_predvla.report.formatting import fmt_rate, table
+from lerobot_predvla.sims.libero import blind_replay
+from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
+
+SUITE = "libero_object"
+# (name, cell-name suffix, what the starts are)
+SETS = (("E1", "", "official init states 0-9"),
+        ("E2", "_resets", "randomised resets of seed 3000"),
+        ("E2p", "_placed_resets", "the resets, objects moved as in D3 (3 cm std)"),
+        ("E3", "_shifted", "official init states, object to pick moved 4 cm"))
+# (cell-name prefix, label)
+POLICIES = (("olt_open_loop", "PredVLA fit_sensory_olt, exact open loop"),
+            ("olt", "PredVLA fit_sensory_olt, Table 2's error regression"),
+            ("olt_carried", "PredVLA fit_sensory_olt, error regression, Adam carried"),
+            ("table2_open_loop", "PredVLA Table 2 literal, exact open loop"),
+            ("table2", "PredVLA Table 2 literal, Table 2's error regression"),
+            ("table2_carried", "PredVLA Table 2 literal, error regression, Adam carried"),
+            ("B1", "BC-Transformer (B1)"),
+            ("B2", "BC-RNN (B2)"))
+NOT_RUN = "not run"
+REPORT_JSON, REPORT_MD, FIGURE = "sets.json", "sets.md", "sets.png"
+COMMAND = "python -m research.demonstration_sets"
+
+
+def cell(runs: Path, config: str, seed: int = 0) -> tuple[int, int] | None:
+    """(successes, episodes) of a cell's run record, None when it has none."""
+    path = runs / "records" / config / SUITE / f"seed{seed}.json"
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text())
+        return int(record["successes"]), int(record["episodes"])
+    except (ValueError, KeyError, TypeError) as err:
+        raise ValueError(f"{path}: not a run record ({err}).") from err
+
+
+def blind_figure(blind: Path, set_name: str, style: str) -> tuple[int, int] | None:
+    """(successes, episodes) of the dataset's plan from state 0 replayed blind on the set, None when not run."""
+    path = blind / f"{set_name}_{style}" / blind_replay.REPORT_JSON
+    if not path.is_file():
+        return None
+    try:
+        tasks = json.loads(path.read_text())[SUITE]
+        return (blind_replay.totals_with_source(tasks) if set_name == "E1" else blind_replay.totals(tasks))
+    except (ValueError, KeyError, TypeError) as err:
+        raise ValueError(f"{path}: not a `predvla blind-replay` report of {SUITE} ({err}).") from err
+
+
+def collect(runs: Path, blind: Path, style: str) -> dict:
+    """sets.json's content: per policy label and set name, [successes, episodes] or None."""
+    if not (runs / "records").is_dir():
+        raise ValueError(f"--runs {runs}: no records/ folder (a `predvla sweep --runs-dir`).")
+    cells = {label: {name: cell(runs, prefix + suffix) for name, suffix, _ in SETS} for prefix, label in POLICIES}
+    return {"style": style, "sets": {name: what for name, _, what in SETS}, "cells": cells,
+            "blind_replay": {name: blind_figure(blind, name, style) for name, _, _ in SETS}}
+
+
+def markdown(report: dict, command: str) -> str:
+    def text(value) -> str:
+        return fmt_rate(*value) if value else NOT_RUN
+
+    header = ["policy", *[f"{name}: {what}" for name, what in report["sets"].items()]]
+    body = [[label, *[text(v) for v in sets.values()]] for label, sets in report["cells"].items()]
+    body.append([f"reference: one {report['style']} demonstration replayed blind (plan from official init state 0)",
+                 *[text(v) for v in report["blind_replay"].values()]])
+    return "\n".join(["# Success per evaluation set", "",
+                      "Success in % (successes/episodes) of every cell of the screen, per evaluation set, with one "
+                      "of the dataset's demonstrations replayed blind on the same starts.", "",
+                      table(header, body), "", "Reproduce:", "", "```bash", command, "```", ""])
+
+
+def figure(report: dict, path: Path) -> None:
+    """Grouped bars, one group per evaluation set, each bar's successes/episodes above it (× where not run), and
+    the blind replay's success as a dashed line across its group."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    sets, labels = list(report["sets"]), list(report["cells"])
+    colors = plt.get_cmap("tab10")
+    fig, ax = plt.subplots(figsize=(12, 4.8))
+    width = 0.8 / len(labels)
+    for i, label in enumerate(labels):
+        for j, name in enumerate(sets):
+            value, x = report["cells"][label][name], j + (i - (len(labels) - 1) / 2) * width
+            if value:
+                height = 100 * value[0] / value[1]
+                ax.bar(x, height, width, color=colors(i))
+                ax.text(x, height + 1, f"{value[0]}/{value[1]}", ha="center", va="bottom", fontsize=6, rotation=90)
+            else:
+                ax.text(x, 1, "×", ha="center", va="bottom", fontsize=8, color=colors(i))
+    for j, name in enumerate(sets):
+        if value := report["blind_replay"][name]:
+            ax.hlines(100 * value[0] / value[1], j - 0.45, j + 0.45, colors="black", linestyles="--")
+    ax.set_xticks(range(len(sets)), [f"{name}: {report['sets'][name]}".replace(", ", ",\n") for name in sets],
+                  fontsize=8)
+    ax.set_ylabel("success (%)")
+    ax.set_ylim(0, 115)
+    ax.set_title(f"Success per evaluation set, {report['style']} demonstrations (× not run)")
+    handles = [Patch(color=colors(i), label=label) for i, label in enumerate(labels)]
+    handles.append(Line2D([], [], color="black", linestyle="--", label="one demonstration replayed blind"))
+    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1))
+    fig.tight_layout()
+    atomic_save_figure(fig, path)
+    plt.close(fig)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=COMMAND, description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=Path, required=True, help="the sweep's --runs-dir")
+    parser.add_argument("--blind", type=Path, required=True, help="folder of the <set>_<style> blind replays")
+    parser.add_argument("--style", choices=("scripted", "teleop"), required=True, help="the dataset's style")
+    parser.add_argument("--out", type=Path, required=True)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser().parse_args(argv)
+    try:
+        report = collect(args.runs, args.blind, args.style)
+    except ValueError as err:
+        print(f"{COMMAND}: error: {err}", file=sys.stderr)
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(args.out / REPORT_JSON, report)
+    atomic_write_text(args.out / REPORT_MD, markdown(report, f"{COMMAND} {shlex.join(argv)}"))
+    figure(report, args.out / FIGURE)
+    print((args.out / REPORT_MD).read_text())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,54 @@
+"""`python -m research.demonstration_sets`: one dataset's screen per evaluation set, against its blind replays, on
+hand-made run records and blind-replay reports."""
+
+import json
+
+from research import demonstration_sets as ds
+
+
+def write_record(runs, config: str, successes: int, episodes: int = 30) -> None:
+    path = runs / "records" / config / "libero_object" / "seed0.json"
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps({"config": config, "successes": successes, "episodes": episodes}))
+
+
+def write_blind(blind, folder: str, tasks: dict) -> None:
+    (blind / folder).mkdir(parents=True)
+    (blind / folder / "report.json").write_text(json.dumps({"libero_object": tasks}))
+
+
+def test_cells_per_set_with_the_blind_replay_on_the_same_starts(tmp_path, capsys):
+    runs, blind, out = tmp_path / "runs", tmp_path / "blind", tmp_path / "out"
+    write_record(runs, "olt_open_loop", 10)  # E1
+    write_record(runs, "olt_shifted", 2)  # E3, Table 2's error regression
+    write_record(runs, "B1_placed_resets", 16)  # E2p
+    write_record(runs, "olt_open_loop_carried", 30)  # no such policy: ignored
+    # E1: the plan on states 1-9 of two tasks plus its replay on its own start (state 0) of each
+    write_blind(blind, "E1_teleop", {"2": {"successes": 8, "episodes": 9, "source_replay_success": True},
+                                     "3": {"successes": 5, "episodes": 9, "source_replay_success": False}})
+    write_blind(blind, "E3_teleop", {"2": {"successes": 1, "episodes": 10, "source_replay_success": True}})
+    write_blind(blind, "E3_scripted", {"2": {"successes": 9, "episodes": 10, "source_replay_success": True}})
+    assert ds.main(["--runs", str(runs), "--blind", str(blind), "--style", "teleop", "--out", str(out)]) == 0
+    report = json.loads((out / "sets.json").read_text())
+    cells = report["cells"]
+    assert cells["PredVLA fit_sensory_olt, exact open loop"] == {"E1": [10, 30], "E2": None, "E2p": None, "E3": None}
+    assert cells["PredVLA fit_sensory_olt, Table 2's error regression"]["E3"] == [2, 30]
+    assert cells["BC-Transformer (B1)"]["E2p"] == [16, 30]
+    assert report["blind_replay"] == {"E1": [14, 20], "E2": None, "E2p": None, "E3": [1, 10]}
+    md = (out / "sets.md").read_text()
+    assert "| PredVLA fit_sensory_olt, exact open loop | 33.3 (10/30) | not run | not run | not run |" in md
+    assert "one teleop demonstration replayed blind (plan from official init state 0) | 70.0 (14/20) |" in md
+    assert (out / "sets.png").stat().st_size > 0
+
+
+def test_a_broken_record_is_named(tmp_path, capsys):
+    runs = tmp_path / "runs"
+    path = runs / "records" / "B2" / "libero_object" / "seed0.json"
+    path.parent.mkdir(parents=True)
+    path.write_text("{}")
+    args = ["--runs", str(runs), "--blind", str(tmp_path), "--style", "scripted", "--out", str(tmp_path / "o")]
+    assert ds.main(args) == 2
+    assert f"{path}: not a run record" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+    assert ds.main([*args[:1], str(tmp_path / "none"), *args[2:]]) == 2
+    assert "no records/ folder" in capsys.readouterr().err
