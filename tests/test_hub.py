@@ -278,6 +278,21 @@ def test_card_names_an_inference_override_that_config_json_predates():
     assert inference_settings({**record, "eval_overrides": {"er_iterations": 0}}, config) == {"er_iterations": 0}
 
 
+def test_card_names_where_each_evaluation_started():
+    """The records table's starts say what moved: the object shift, the variant and the placement spread that the
+    recorded evaluation command passed, beside official init states or randomised resets."""
+    from lerobot_predvla.hub.card import evaluation_starts
+
+    assert evaluation_starts({"init_states": True}) == "official init states"
+    assert evaluation_starts({"init_states": True, "object_shift": {"cm": 4, "pattern": "cross"}}) == (
+        "official init states, object to pick moved 4 cm, cross")
+    placed = {"init_states": False, "eval_seed": 3000, "commands": {"eval": [
+        ["lerobot-eval", "--seed=3000", "--env.placement_spread_cm=3", "--env.task_ids=[2]"],
+        ["lerobot-eval", "--seed=3000", "--env.placement_spread_cm=3", "--env.task_ids=[3]"]]}}
+    assert evaluation_starts(placed) == "randomised resets (seed 3000), objects moved 3 cm (std per axis)"
+    assert evaluation_starts({"variant": "pro_swap"}) == "official init states, variant pro_swap"
+
+
 def test_acting_from_python_runs_as_written_without_a_device_warning():
     """docs/hub.md's "Acting from Python" example, as written, in a fresh interpreter from the repository root: raw
     frames and the task through the saved processors and `select_action`, a (1, 7) action per step; loading the

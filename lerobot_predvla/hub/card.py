@@ -352,6 +352,23 @@ def inference_settings(record: dict, config: dict) -> dict:
     return {k: v for k, v in fields.items() if k in loaded and k not in NOT_RECIPE and differs(v, loaded[k])}
 
 
+def evaluation_starts(record: dict) -> str:
+    """Where a run record's episodes started: official init states or randomised resets, with the object shift,
+    the LIBERO-PRO / LIBERO-plus variant and the placement spread (`--env.placement_spread_cm`, read from its
+    recorded evaluation command) it ran with."""
+    words = ["official init states" if record.get("init_states", True) is not False
+             else f"randomised resets (seed {record.get('eval_seed')})"]
+    if shift := record.get("object_shift"):
+        pattern = f", {shift['pattern']}" if shift.get("pattern") else ""
+        words.append(f"object to pick moved {float(shift['cm']):g} cm{pattern}")
+    if variant := record.get("variant"):
+        words.append(f"variant {variant}")
+    spreads = {a.split("=", 1)[1] for command in (record.get("commands") or {}).get("eval") or []
+               for a in command if a.startswith("--env.placement_spread_cm=")}
+    words += [f"objects moved {spread} cm (std per axis)" for spread in sorted(spreads)]
+    return ", ".join(words)
+
+
 def _records_section(records: list[dict], config: dict) -> str:
     """Every evaluation of the checkpoint, from its run records (per-task successes from its eval_info.json)."""
     lines = [
@@ -364,8 +381,7 @@ def _records_section(records: list[dict], config: dict) -> str:
     ]
     for r in sorted(records, key=lambda r: (r["results"], r["config"])):
         inference = ", ".join(f"`{k}={v}`" for k, v in inference_settings(r, config).items()) or "as in config.json"
-        starts = ("official init states" if r.get("init_states", True) is not False
-                  else f"randomised resets (seed {r.get('eval_seed')})")
+        starts = evaluation_starts(r)
         tasks = ", ".join(str(t["successes"]) for _, t in sorted(r["tasks"].items(), key=lambda kv: int(kv[0])))
         lines.append(f"| `{r['results']}` `{r['config']}` | {inference} | {starts} | {r['n_episodes_per_task']} | "
                      f"{r['episode_length']} | {tasks} | {r['successes']}/{r['episodes']} "
