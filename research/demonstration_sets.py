@@ -23,6 +23,8 @@ import sys
 from pathlib import Path
 
 from lerobot_predvla.report.formatting import fmt_rate, table
+from lerobot_predvla.report.headline import load_blind_replay
+from lerobot_predvla.report.results import ReportError
 from lerobot_predvla.sims.libero import blind_replay
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
@@ -59,15 +61,19 @@ def cell(runs: Path, config: str, seed: int = 0) -> tuple[int, int] | None:
 
 
 def blind_figure(blind: Path, set_name: str, style: str) -> tuple[int, int] | None:
-    """(successes, episodes) of the dataset's plan from state 0 replayed blind on the set, None when not run."""
-    path = blind / f"{set_name}_{style}" / blind_replay.REPORT_JSON
-    if not path.is_file():
-        return None
+    """(successes, episodes) of the dataset's plan from state 0 replayed blind on the set, None when not run (the
+    report read and checked as the headline reads its blind replays)."""
+    folder = blind / f"{set_name}_{style}"
     try:
-        tasks = json.loads(path.read_text())[SUITE]
-        return (blind_replay.totals_with_source(tasks) if set_name == "E1" else blind_replay.totals(tasks))
-    except (ValueError, KeyError, TypeError) as err:
-        raise ValueError(f"{path}: not a `predvla blind-replay` report of {SUITE} ({err}).") from err
+        report = load_blind_replay(folder, folder)
+    except ReportError as err:
+        raise ValueError(str(err)) from err
+    if report is None:
+        return None
+    if SUITE not in report:
+        raise ValueError(f"{folder / blind_replay.REPORT_JSON}: no {SUITE} blind replay.")
+    tasks = report[SUITE]
+    return blind_replay.totals_with_source(tasks) if set_name == "E1" else blind_replay.totals(tasks)
 
 
 def collect(runs: Path, blind: Path, style: str) -> dict:
