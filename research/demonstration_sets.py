@@ -65,7 +65,7 @@ def blind_figure(blind: Path, set_name: str, style: str) -> tuple[int, int] | No
     report read and checked as the headline reads its blind replays)."""
     folder = blind / f"{set_name}_{style}"
     try:
-        report = load_blind_replay(folder, folder)
+        report = load_blind_replay(folder)
     except ReportError as err:
         raise ValueError(str(err)) from err
     if report is None:

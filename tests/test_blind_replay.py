@@ -44,7 +44,7 @@ def test_tiny_run_writes_the_report_and_replays_each_plan_exactly_on_its_source(
     committed = tmp_path / blind_replay.DEFAULT_OUT / blind_replay.REPORT_JSON
     committed.parent.mkdir(parents=True)
     committed.write_text((out / blind_replay.REPORT_JSON).read_text())
-    assert headline.load_blind_replay(tmp_path) == report
+    assert headline.load_blind_replay(tmp_path / blind_replay.DEFAULT_OUT) == report
     assert entry["source_state"] == 0 and entry["episodes"] == len(STATES) and entry["states"] == list(STATES)
     assert 0 <= entry["successes"] <= entry["episodes"]
     assert second["episodes"] == len(STATES) - len(second["excluded_states"])

@@ -267,7 +267,7 @@ def _row_blind_replay(root: Path, exp: Experiment, cells: dict[str, Cell]) -> tu
     ran: its plan replayed on states 1..n-1 and on its own start, state 0; an error naming the report when those are
     not the row's starts."""
     folder = Path(root) / "results" / exp.blind_replay
-    report = load_blind_replay(root, folder)
+    report = load_blind_replay(folder)
     path = folder / blind_replay.REPORT_JSON
     if report is None or SUITE not in report:
         raise ReportError(f"{path}: no {SUITE} blind replay, which the headline row of results/{exp.results} shows.")
@@ -334,10 +334,9 @@ def summary_table(rows: list[Row], prefix: str, blind: dict | None = None) -> st
 
 
 # ----- the reference row: one demonstration replayed blind (`predvla blind-replay`) ----------------------------
-def load_blind_replay(root: Path, folder: Path | None = None) -> dict | None:
-    """`folder`'s (default results/blind_replay/) report.json (suite -> task -> successes, episodes, ...), None when
-    not committed."""
-    path = (Path(folder) if folder else Path(root) / blind_replay.DEFAULT_OUT) / blind_replay.REPORT_JSON
+def load_blind_replay(folder: Path) -> dict | None:
+    """`folder`'s report.json (suite -> task -> successes, episodes, ...), None when not committed."""
+    path = Path(folder) / blind_replay.REPORT_JSON
     if not path.is_file():
         return None
     try:
@@ -556,7 +555,7 @@ def update_docs(root: Path, check: bool = False) -> list[Path]:
     """Rewrite (or, with `check`, compare) the headline blocks and the shipped checkpoints' configs and model cards;
     returns the files that differ(ed). Every file is read and checked before any is written."""
     rows = build_rows(root)
-    blind = load_blind_replay(root)
+    blind = load_blind_replay(Path(root) / blind_replay.DEFAULT_OUT)
     new = {}
     for name, prefix, detailed in ((README, "", False), (RESULTS_DOC, "../", True)):
         path = Path(root) / name
