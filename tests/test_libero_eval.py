@@ -233,3 +233,16 @@ def test_step_caps_are_lerobots():
 
     assert set(STEP_CAPS) == set(SUITES)
     assert {suite: TASK_SUITE_MAX_STEPS[suite] for suite in SUITES} == STEP_CAPS
+
+
+def test_suites_are_built_quietly(capsys):
+    """LIBERO prints "[info] using task orders" whenever it builds a suite; the project's lookups build them silently,
+    and an unknown suite's error names the ones that exist."""
+    from lerobot_predvla.sims.libero import env as libero_env
+
+    assert libero_env.num_tasks("libero_object") == 10
+    assert len(libero_env.libero_instructions()) == 40
+    assert libero_env.official_init_states("libero_goal", 0).shape[0] == 50
+    assert "using task orders" not in capsys.readouterr().out
+    with pytest.raises(ValueError, match="libero_object"):
+        libero_env.libero_suite("libero_objects")

@@ -5,6 +5,8 @@ is set (`use_headless_gl`), so rendering works headless on CPU. Importing this m
 never loads the simulator (and the commands it starts) keeps its environment as it was.
 """
 
+import contextlib
+import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,6 +54,17 @@ def _libero():
     return libero_pkg, benchmark
 
 
+def libero_suite(name: str):
+    """LIBERO's benchmark suite `name` (for example libero_object), built without the "[info] using task orders" line
+    LIBERO prints each time it builds one (a sweep's planning and every task lookup build one)."""
+    _, benchmark = _libero()
+    suites = benchmark.get_benchmark_dict()
+    if name not in suites:
+        raise ValueError(f"unknown LIBERO suite {name!r}; expected one of {', '.join(sorted(suites))}")
+    with contextlib.redirect_stdout(io.StringIO()):
+        return suites[name]()
+
+
 @dataclass(frozen=True)
 class TaskSpec:
     suite: str
@@ -67,10 +80,10 @@ class TaskSpec:
 
 
 def task_spec(suite: str, task_id: int) -> TaskSpec:
-    libero_pkg, benchmark = _libero()
     if suite not in SUITES:
         raise ValueError(f"unknown suite {suite!r}; expected one of {SUITES}")
-    bench = benchmark.get_benchmark_dict()[suite]()
+    libero_pkg, _ = _libero()
+    bench = libero_suite(suite)
     if not 0 <= task_id < bench.n_tasks:
         raise ValueError(f"task id {task_id} out of range for {suite} ({bench.n_tasks} tasks)")
     task = bench.get_task(task_id)
@@ -81,20 +94,16 @@ def task_spec(suite: str, task_id: int) -> TaskSpec:
 def libero_instructions(suites: tuple[str, ...] = SUITES) -> tuple[str, ...]:
     """The language instructions of every task of `suites` from LIBERO's task list (no demonstration needed):
     40 for the four suites, the set the paper's language PCA is fitted on (Section 4.1)."""
-    _, benchmark = _libero()
-    benchmarks = benchmark.get_benchmark_dict()
-    return tuple(task.language for suite in suites for task in benchmarks[suite]().tasks)
+    return tuple(task.language for suite in suites for task in libero_suite(suite).tasks)
 
 
 def num_tasks(suite: str) -> int:
-    _, benchmark = _libero()
-    return benchmark.get_benchmark_dict()[suite]().n_tasks
+    return libero_suite(suite).n_tasks
 
 
 def official_init_states(suite: str, task_id: int) -> np.ndarray:
     """The benchmark's official evaluation init states of one task (50 flattened simulator states)."""
-    _, benchmark = _libero()
-    return benchmark.get_benchmark_dict()[suite]().get_task_init_states(task_id)
+    return libero_suite(suite).get_task_init_states(task_id)
 
 
 def env_kwargs(spec: TaskSpec, render: bool, init_noise: float = 0.0) -> dict:

