@@ -148,3 +148,38 @@ def test_open_loop_actions_are_what_select_action_gives_in_exact_open_loop():
     raw = open_loop.actions(instruction, 8)
     low, high = (open_loop.postprocessor.steps[0]._tensor_stats["action"][k].numpy() for k in ("min", "max"))
     np.testing.assert_allclose(raw, (normalised.numpy() + 1) / 2 * (high - low) + low, atol=1e-5)
+
+
+def test_mean_plan_is_the_time_aligned_mean_and_demo_is_the_demonstration():
+    from research.divergence.mean_plan import task_plans
+
+    short, long = np.full((3, 7), 1.0), np.full((5, 7), 3.0)
+    plans = task_plans([short, long], demo=1)
+    np.testing.assert_allclose(plans["mean"][:3], 2.0)  # both run: their mean
+    np.testing.assert_allclose(plans["mean"][3:], 3.0)  # only the longer one (half of them) still runs
+    assert np.array_equal(plans["demo"], long)
+    with pytest.raises(ValueError, match="--demo 2"):
+        task_plans([short, long], demo=2)
+
+
+@pytest.mark.simulator
+def test_mean_plan_command_on_the_simulator(demo_root):
+    from research.divergence.mean_plan import main
+
+    out = demo_root / "mean_plan"
+    assert main(["--hdf5-root", str(demo_root / "hdf5"), "--tasks", str(TASK_ID), "--states", "0-1", "--cap", "300",
+                 "--out", str(out)]) == 0
+    task = json.loads((out / "mean_plan.json").read_text())["tasks"][str(TASK_ID)]
+    assert task["demonstrations"] == 2 and task["plan_lengths"]["mean"] == task["demo_lengths"][1]
+    closes = task["demo_close_steps"]
+    for name in ("mean", "demo"):
+        episodes = task["episodes"][name]
+        assert [e["state"] for e in episodes] == [0, 1]
+        for e in episodes:
+            assert len(e["offset_m"]) == 3 and all(np.isfinite(e["offset_m"]))
+            assert e["success_step"] is None or 0 < e["success_step"] <= 300
+    assert min(closes) <= task["episodes"]["mean"][0]["close"] <= max(closes)
+    assert task["episodes"]["demo"][0]["close"] == closes[0]
+    assert task["summary"]["mean"]["episodes"] == 2
+    assert (out / "mean_plan.md").read_text().count(f"| {TASK_ID} |") == 2
+    assert (out / "mean_plan.png").stat().st_size > 5_000
