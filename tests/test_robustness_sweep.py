@@ -96,7 +96,38 @@ def test_robustness_table_pools_seeds_orders_conditions_and_leaves_other_runs_ou
     assert "main" not in text
     assert robustness_table([_record("main", "libero_object", None, 20)]) is None
     assert robustness_figure(records, tmp_path / "f.png") and (tmp_path / "f.png").is_file()
-    assert not robustness_figure([_record("P", "libero_object", 2, 8)], tmp_path / "g.png")  # one point: no line
+    assert robustness_figure([_record("P", "libero_object", 2, 8)], tmp_path / "g.png")  # one point: a marker
+    assert not robustness_figure([_record("P", "libero_object", None, 8, variant="pro_swap")], tmp_path / "h.png")
+
+
+def _blind_replay(root: Path, cm: float, successes: list[int]) -> Path:
+    """A `predvla blind-replay` report folder's per-task files: two episodes per task, the object shifted `cm`."""
+    folder = root / f"shift{cm:g}"
+    for task, won in enumerate(successes):
+        settings = {"states": [0, 1], **({"shift": {"object_cm": cm, "pattern": "ring"}} if cm else {})}
+        atomic_write_json(folder / "tasks" / "libero_object" / f"task{2 * task}.json",
+                          {"settings": settings, "plans": {"state0": {"successes": won, "episodes": 2}}})
+    return folder
+
+
+def test_blind_replays_are_a_reference_row_and_a_dashed_line_of_the_robustness_section(tmp_path):
+    from lerobot_predvla.report.results import ReportError
+    from lerobot_predvla.report.robustness import BLIND_LABEL, blind_line
+
+    line = blind_line([_blind_replay(tmp_path, 4.0, [1, 0]), _blind_replay(tmp_path, 0.0, [2, 1])])
+    assert line == {"libero_object": [(0.0, 3, 4), (4.0, 1, 4)]}  # by shift, whatever the order given
+    records = [_record("P", "libero_object", 4, 8)]
+    text = robustness_table(records, blind=line)
+    assert text.splitlines()[0] == "| Policy | Suite | 0 cm | 4 cm |"
+    assert f"| {BLIND_LABEL} | object | 75.0 (3/4) | 25.0 (1/4) |" in text
+    assert robustness_figure(records, tmp_path / "f.png", line)
+    mixed = _blind_replay(tmp_path / "mixed", 2.0, [1])
+    atomic_write_json(mixed / "tasks" / "libero_object" / "task9.json",
+                      {"settings": {"states": [0]}, "plans": {"state0": {"successes": 0, "episodes": 1}}})
+    with pytest.raises(ReportError, match="different object shifts"):
+        blind_line([mixed])
+    with pytest.raises(ReportError, match=r"--blind-replay .*empty: no `predvla blind-replay` per-task results"):
+        blind_line([tmp_path / "empty"])
 
 
 @pytest.mark.parametrize("change, message", [

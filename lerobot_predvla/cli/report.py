@@ -20,6 +20,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("runs_dir", type=Path, nargs="?",
                         help="The --runs-dir of `predvla sweep` (records/ and plan.json).")
     parser.add_argument("--out", type=Path, help="Report directory (report.md, report.json, PNGs).")
+    parser.add_argument("--blind-replay", type=Path, nargs="+", default=[], metavar="DIR",
+                        help="Reports of `predvla blind-replay`, one object shift each: one plan replayed blind as a "
+                             "reference row and dashed line of the robustness table and figure.")
     parser.add_argument("--docs", action="store_true",
                         help=f"Rewrite the headline block of {README} and {RESULTS_DOC} from results/*/report.json "
                              "and the configs and model cards of every checkpoint under checkpoints/ (no RUNS_DIR).")
@@ -37,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.docs:
             return _docs(args)
-        summary = write_report(args.runs_dir, args.out)
+        summary = write_report(args.runs_dir, args.out, args.blind_replay)
     except ReportError as err:
         print(f"predvla report: error: {err}", file=sys.stderr)
         return 2

@@ -7,18 +7,23 @@ success in % with successes/episodes, the episodes whose shifted bodies did not 
 same success without those (settled episodes only: the record names them, `eval_info.json` gives their successes;
 "n/a" for a record that kept only their count). A second table pairs every such configuration with `compare_to`
 episode by episode with the run it names, per condition, over all pairs and over the settled ones.
-The figure draws success against the shift distance, one line per row.
+The figure draws success against the shift distance, one line per row. With blind replays (`predvla report
+--blind-replay DIR`, reports of `predvla blind-replay`, each at one object shift), one plan replayed blind is a
+reference row of the table and a dashed line of the figure.
 """
 
 from pathlib import Path
 
 from lerobot_predvla.report.formatting import MISSING, fmt_rate, table
-from lerobot_predvla.report.results import run_episodes, unsettled_keys
+from lerobot_predvla.report.results import ReportError, run_episodes, unsettled_keys
+from lerobot_predvla.sims.libero import blind_replay
 from lerobot_predvla.sims.libero.protocol import SUITE_LABELS
 from lerobot_predvla.utils.io import atomic_save_figure
 from lerobot_predvla.utils.statistics import episode_totals, percent
 
 ROBUSTNESS_FIGURE = "success_vs_shift.png"
+BLIND_LABEL = "reference, not a policy: one plan replayed blind"
+BlindLine = dict[str, list[tuple[float, int, int]]]  # suite -> (object shift in cm, successes, episodes) per report
 
 
 def condition(record: dict) -> tuple[str, float, str] | None:
@@ -67,6 +72,29 @@ def _cells(records: list[dict], runs_dir: Path | None = None) -> dict[tuple[str,
     return cells
 
 
+def blind_line(folders: list[Path]) -> BlindLine:
+    """The blind replays' points per suite, by shift, from `predvla blind-replay` report folders."""
+    line: BlindLine = {}
+    for folder in folders:
+        try:
+            found = blind_replay.shift_totals(Path(folder))
+        except ValueError as err:
+            raise ReportError(f"--blind-replay {folder}: {err}") from err
+        for suite, point in found.items():
+            line.setdefault(suite, []).append(point)
+    return {suite: sorted(points) for suite, points in line.items()}
+
+
+def _with_blind(cells: dict, blind: BlindLine | None) -> dict:
+    """`cells` with the blind replays' row per suite (every episode settled: the replays report their shifts apart)."""
+    for suite, points in (blind or {}).items():
+        row = cells.setdefault((BLIND_LABEL, suite), {})
+        for cm, successes, episodes in points:
+            cell = row.setdefault(("", cm, f"{cm:g} cm"), [0, 0, 0, 0, 0])
+            cell[:] = [cell[0] + successes, cell[1] + episodes, 0, cell[3] + successes, cell[4] + episodes]
+    return cells
+
+
 def _fmt(cell: list | None) -> str:
     if cell is None:
         return MISSING
@@ -77,9 +105,9 @@ def _fmt(cell: list | None) -> str:
     return text + (f"; settled {fmt_rate(settled_successes, settled_episodes)}" if unsettled else "")
 
 
-def robustness_table(records: list[dict], runs_dir: Path | None = None) -> str | None:
+def robustness_table(records: list[dict], runs_dir: Path | None = None, blind: BlindLine | None = None) -> str | None:
     """The Markdown table (see the module docstring), or None without such runs."""
-    cells = _cells(records, runs_dir)
+    cells = _with_blind(_cells(records, runs_dir), blind)
     if not cells:
         return None
     columns = sorted({key for row in cells.values() for key in row})  # shifts (no variant) first, by distance
@@ -116,13 +144,14 @@ def robustness_pairs_table(records: list[dict], summary: dict) -> str | None:
                   "settled: sign test p"], rows)
 
 
-def robustness_figure(records: list[dict], path: Path) -> bool:
-    """Success against the object's shift, one line per row with two or more shift distances; False when none."""
+def robustness_figure(records: list[dict], path: Path, blind: BlindLine | None = None) -> bool:
+    """Success against the object's shift, one line per row (a marker for a row at one distance; the blind replay
+    dashed); False when no row has a shift."""
     lines = {}
-    for row, by_condition in _cells(records).items():
+    for row, by_condition in _with_blind(_cells(records), blind).items():
         points = sorted((cm, percent(c[0], c[1])) for (variant, cm, _), c in by_condition.items()
                         if not variant and c[1])
-        if len(points) >= 2:
+        if points:
             lines[row] = points
     if not lines:
         return False
@@ -131,12 +160,13 @@ def robustness_figure(records: list[dict], path: Path) -> bool:
     fig, ax = plt.subplots(figsize=(6, 4))
     for (label, suite), points in lines.items():
         name = label if len({s for _, s in lines}) == 1 else f"{label} ({SUITE_LABELS.get(suite, suite)})"
-        ax.plot(*zip(*points, strict=True), marker="o", label=name)
+        style = {"color": "black", "linestyle": "--"} if label == BLIND_LABEL else {}
+        ax.plot(*zip(*points, strict=True), marker="o", label=name, **style)
     ax.set_xlabel("object shifted (cm)")
     ax.set_ylabel("success (%)")
     ax.set_ylim(-2, 102)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16))  # below: the lines fill the axes
     atomic_save_figure(fig, path, dpi=130, bbox_inches="tight")
     plt.close(fig)
     return True

@@ -16,6 +16,7 @@ from lerobot_predvla.report.paired import paired_episodes
 from lerobot_predvla.report.results import SUMMARY_FILE, Results, load_plan, load_records
 from lerobot_predvla.report.robustness import (
     ROBUSTNESS_FIGURE,
+    blind_line,
     robustness_figure,
     robustness_pairs_table,
     robustness_table,
@@ -45,14 +46,19 @@ from lerobot_predvla.utils.io import atomic_write_json, atomic_write_text
 REPORT_FILE = "report.md"
 
 
-def write_report(runs_dir: Path, out: Path) -> dict:
-    """Build tables, figures, `report.md` and `report.json` in `out`; returns the summary."""
+def write_report(runs_dir: Path, out: Path, blind_replays: list[Path] = ()) -> dict:
+    """Build tables, figures, `report.md` and `report.json` in `out`; returns the summary. `blind_replays`: reports
+    of `predvla blind-replay` (one object shift each) drawn beside the robustness runs."""
     import matplotlib
 
     matplotlib.use("Agg")
     records = load_records(runs_dir)
     results = Results.build(records, load_plan(runs_dir))
     summary = summarize(results)
+    blind = blind_line(blind_replays)
+    if blind:
+        summary["blind_replay"] = {suite: [[cm, successes, episodes] for cm, successes, episodes in points]
+                                   for suite, points in blind.items()}
     paired_episodes(summary, records, Path(runs_dir))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -64,7 +70,7 @@ def write_report(runs_dir: Path, out: Path) -> dict:
         "tasks": task_figure(results, out / FIGURES["tasks"]),
     }
     summary["figures"] = {k: FIGURES[k] for k, ok in made.items() if ok}
-    if robustness_figure(records, out / ROBUSTNESS_FIGURE):
+    if robustness_figure(records, out / ROBUSTNESS_FIGURE, blind):
         summary["figures"]["robustness"] = ROBUSTNESS_FIGURE
     missing = [
         f"{name}/{suite}/seed{seed}"
@@ -119,8 +125,8 @@ def write_report(runs_dir: Path, out: Path) -> dict:
         ),
         (
             "Robustness: shifted objects and LIBERO-PRO / LIBERO-plus variants",
-            "\n\n".join(t for t in (robustness_table(records, runs_dir), robustness_pairs_table(records, summary))
-                        if t) or None,
+            "\n\n".join(t for t in (robustness_table(records, runs_dir, blind),
+                                    robustness_pairs_table(records, summary)) if t) or None,
             "robustness",
             "Success in % (successes/episodes, pooled over seeds) per condition: the object to pick shifted by the "
             "distance shown from each official init state, or a LIBERO-PRO / LIBERO-plus variant of the suite; "

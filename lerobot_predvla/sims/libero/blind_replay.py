@@ -321,6 +321,27 @@ def collect(out: Path) -> dict[str, dict[str, dict]]:
     return report
 
 
+def shift_totals(out: Path) -> dict[str, tuple[float, int, int]]:
+    """Per suite of the report at `out`: (the object shift in cm, 0 without one; successes, episodes of the plan from
+    the source state), from its per-task files, whose settings name the shift."""
+    found = {}
+    for suite in SUITES:
+        files = sorted((Path(out) / TASKS_DIR / suite).glob("task*.json"))
+        tasks = [load_task(path) for path in files]
+        if not tasks:
+            continue
+        if any(task is None for task in tasks):
+            raise ValueError(f"{Path(out) / TASKS_DIR / suite}: an unreadable per-task result")
+        shifts = {float((task["settings"].get("shift") or {}).get("object_cm", 0.0)) for task in tasks}
+        if len(shifts) != 1:
+            raise ValueError(f"{out}: the tasks of {suite} ran with different object shifts {sorted(shifts)}")
+        successes, episodes = episode_totals(task["plans"]["state0"] for task in tasks)
+        found[suite] = (shifts.pop(), successes, episodes)
+    if not found:
+        raise ValueError(f"{out}: no `predvla blind-replay` per-task results under {TASKS_DIR}/")
+    return found
+
+
 def totals(tasks: dict[str, dict], key: str | None = None) -> tuple[int, int]:
     """(successes, episodes) of a suite's tasks: the state-0 plan's, or with `key` (`NEAREST_MEAN_KEY`) the other's."""
     return episode_totals(t if key is None else t[key] for t in tasks.values())
