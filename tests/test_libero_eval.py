@@ -246,3 +246,14 @@ def test_suites_are_built_quietly(capsys):
     assert "using task orders" not in capsys.readouterr().out
     with pytest.raises(ValueError, match="libero_object"):
         libero_env.libero_suite("libero_objects")
+
+
+def test_a_suite_without_tasks_is_refused_naming_it(monkeypatch):
+    from types import SimpleNamespace
+
+    from lerobot_predvla.sims.libero import env as libero_env
+
+    empty = SimpleNamespace(get_benchmark_dict=lambda: {"libero_empty": lambda: SimpleNamespace(tasks=[])})
+    monkeypatch.setattr(libero_env, "_libero", lambda: (None, empty))
+    with pytest.raises(ValueError, match="'libero_empty' has no tasks"):
+        libero_env.libero_suite("libero_empty")

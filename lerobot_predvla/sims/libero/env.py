@@ -62,7 +62,10 @@ def libero_suite(name: str):
     if name not in suites:
         raise ValueError(f"unknown LIBERO suite {name!r}; expected one of {', '.join(sorted(suites))}")
     with contextlib.redirect_stdout(io.StringIO()):
-        return suites[name]()
+        suite = suites[name]()
+    if not getattr(suite, "tasks", None):  # as lerobot's own suite lookup checks
+        raise ValueError(f"LIBERO suite {name!r} has no tasks")
+    return suite
 
 
 @dataclass(frozen=True)
