@@ -97,10 +97,11 @@ EXPERIMENTS = (
     Experiment("libero_object_cpu_hold", "configs/sweeps/libero_object_cpu_hold.yaml", "CPU recipe, lambda_q = 100",
                "predvla_cpu_lambda_q100", "predvla_cpu_lambda_q100_open_loop"),
     # The teleoperator model's demonstrations with placements varied by 3 cm (docs/research/demonstrations.md, D3),
-    # screening scale: both PredVLA recipes and the BC baselines trained on them, official init states 0-9 of three
-    # tasks.
-    *(Experiment("demonstrations/teleop_placed", "configs/sweeps/libero_object_demos_teleop_placed.yaml", recipe,
+    # then without the placements (D2), screening scale: both PredVLA recipes and the BC baselines trained on them,
+    # official init states 0-9 of three tasks (a row once its PredVLA has an error-regression cell).
+    *(Experiment(f"demonstrations/{data}", f"configs/sweeps/libero_object_demos_{data}.yaml", recipe,
                  config, f"{config}_open_loop", "B2", "B1", blind_replay="demonstrations/blind_replay/E1_teleop")
+      for data in ("teleop_placed", "teleop")
       for recipe, config in (("fit_sensory_olt", "olt"), ("Table 2", "table2"))),
 )
 
