@@ -10,8 +10,8 @@ exact two-sided sign test is on the pairs that succeed in only one. Command (fro
   python -m research.dataset_pairs --runs D2=results/demonstrations/teleop/runs \\
       --runs D3=results/demonstrations/teleop_placed/runs --out results/demonstrations/pairs_D3_D2
 
-Writes OUT/pairs.json and OUT/pairs.md: per cell, episodes paired, successes of each dataset, only-first /
-only-second and the sign test's p.
+Writes OUT/pairs.json and OUT/pairs.md: per cell, `lerobot_predvla.report.paired.episode_pairs` of the first dataset
+against the second (episodes paired, successes of each, only-first / only-second, the sign test's p).
 """
 
 import argparse
@@ -20,10 +20,9 @@ import sys
 from pathlib import Path
 
 from lerobot_predvla.report.formatting import table
-from lerobot_predvla.report.paired import same_starts
+from lerobot_predvla.report.paired import episode_pairs, same_starts
 from lerobot_predvla.report.results import ReportError, load_records, run_episodes
 from lerobot_predvla.utils.io import atomic_write_json, atomic_write_text
-from lerobot_predvla.utils.statistics import sign_test
 
 COMMAND = "python -m research.dataset_pairs"
 
@@ -46,11 +45,7 @@ def pair_cell(first: tuple[Path, dict], second: tuple[Path, dict]) -> dict | Non
         return None
     ep_a, ep_b = (run_episodes(runs, rec["config"], rec["suite"], int(rec["seed"]))
                   for runs, rec in ((runs_a, rec_a), (runs_b, rec_b)))
-    keys = sorted(ep_a.keys() & ep_b.keys())
-    only_a = sum(ep_a[k] and not ep_b[k] for k in keys)
-    only_b = sum(ep_b[k] and not ep_a[k] for k in keys)
-    return {"pairs": len(keys), "successes": [sum(ep_a[k] for k in keys), sum(ep_b[k] for k in keys)],
-            "only": [only_a, only_b], "sign_test_p": sign_test(only_a, only_b)}
+    return episode_pairs(ep_a, ep_b, ep_a.keys() & ep_b.keys())
 
 
 def collect(runs: dict[str, Path], cells: list[str] | None) -> dict:
@@ -74,8 +69,8 @@ def markdown(report: dict, command: str) -> str:
     header = ["cell (config/suite/seed)", "episode pairs", f"successes {a} / {b}", f"only {a} / only {b}",
               "sign test p"]
     body = [[cell, "starts differ", "", "", ""] if isinstance(v, str) else
-            [cell, str(v["pairs"]), f"{v['successes'][0]} / {v['successes'][1]}", f"{v['only'][0]} / {v['only'][1]}",
-             f"{v['sign_test_p']:.2g}"] for cell, v in report["cells"].items()]
+            [cell, str(v["pairs"]), f"{v['successes']} / {v['against_successes']}",
+             f"{v['only']} / {v['only_against']}", f"{v['sign_test_p']:.2g}"] for cell, v in report["cells"].items()]
     return "\n".join([f"# The same cells trained on {a} and on {b}", "",
                       "Each episode against the same start (same task, evaluation seed, reset mode and shift); exact "
                       "two-sided sign test on the pairs that succeed in only one.", "", table(header, body), "",

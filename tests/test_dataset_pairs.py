@@ -3,6 +3,7 @@ hand-made run records and eval_info.json files."""
 
 import json
 
+from lerobot_predvla.utils.statistics import sign_test
 from research import dataset_pairs as dp
 
 
@@ -32,8 +33,8 @@ def test_same_cells_pair_on_the_same_starts(tmp_path, capsys):
     assert dp.main(args) == 0
     report = json.loads((out / "pairs.json").read_text())
     assert report["datasets"] == ["D2", "D3"]
-    assert report["cells"]["B1/libero_object/0"] == {"pairs": 8, "successes": [4, 7], "only": [1, 4],
-                                                     "sign_test_p": dp.sign_test(1, 4)}
+    assert report["cells"]["B1/libero_object/0"] == {"pairs": 8, "successes": 4, "against_successes": 7, "only": 1,
+                                                     "only_against": 4, "sign_test_p": sign_test(1, 4)}
     assert report["cells"]["B1_shifted/libero_object/0"] == "starts differ"
     assert set(report["cells"]) == {"B1/libero_object/0", "B1_shifted/libero_object/0"}
     assert "| B1/libero_object/0 | 8 | 4 / 7 | 1 / 4 | 0.38 |" in (out / "pairs.md").read_text()

@@ -52,6 +52,13 @@ def _tested(counts: dict[str, int]) -> dict:
     return {**counts, "sign_test_p": sign_test(counts["only"], counts["only_against"])}
 
 
+def episode_pairs(mine: dict, theirs: dict, keys: Iterable[tuple[str, int]]) -> dict:
+    """PAIR_COUNTS and the sign test over the episode pairs `keys` of two runs (`run_episodes`), all tasks together."""
+    tasks: dict[str, dict[str, int]] = {}
+    _add_pairs(tasks, mine, theirs, keys)
+    return _tested(sum_counts(tasks.values()) if tasks else dict.fromkeys(PAIR_COUNTS, 0))
+
+
 def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
     """Add `episodes` (per suite: pairs, successes, discordant counts, sign test) to every `compare_to` entry; where
     an object was shifted, `settled`: the same over the pairs whose shifted objects settled in both runs (None when a
