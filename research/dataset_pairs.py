@@ -10,8 +10,8 @@ exact two-sided sign test is on the pairs that succeed in only one. Command (fro
   python -m research.dataset_pairs --runs D2=results/demonstrations/teleop/runs \\
       --runs D3=results/demonstrations/teleop_placed/runs --out results/demonstrations/pairs_D3_D2
 
-Writes OUT/pairs.json and OUT/pairs.md: per cell, `lerobot_predvla.report.paired.episode_pairs` of the first dataset
-against the second (episodes paired, successes of each, only-first / only-second, the sign test's p).
+Writes OUT/pairs.json and OUT/pairs.md: per cell, the report's paired counts (`lerobot_predvla.report.paired`) of
+the first dataset against the second (episodes paired, successes of each, only-first / only-second, the sign test's p).
 """
 
 import argparse
@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 from lerobot_predvla.report.formatting import table
-from lerobot_predvla.report.paired import episode_pairs, same_starts
+from lerobot_predvla.report.paired import PAIR_COUNTS, add_pairs, same_starts, sum_counts, with_sign_test
 from lerobot_predvla.report.results import ReportError, load_records, run_episodes
 from lerobot_predvla.utils.io import atomic_write_json, atomic_write_text
 
@@ -36,6 +36,13 @@ def env_args(record: dict) -> set[str]:
 def alike(a: dict, b: dict) -> bool:
     """Whether episode i of a task starts from the same state in both records."""
     return same_starts(a, b) and env_args(a) == env_args(b)
+
+
+def episode_pairs(mine: dict, theirs: dict, keys: set[tuple[str, int]]) -> dict:
+    """PAIR_COUNTS and the sign test over the episode pairs `keys` of two runs (`run_episodes`), all tasks together."""
+    tasks: dict[str, dict[str, int]] = {}
+    add_pairs(tasks, mine, theirs, keys)
+    return with_sign_test(sum_counts(tasks.values()) if tasks else dict.fromkeys(PAIR_COUNTS, 0))
 
 
 def pair_cell(first: tuple[Path, dict], second: tuple[Path, dict]) -> dict | None:

@@ -41,7 +41,7 @@ def test_runs_write_records_and_inference_variants_reuse_checkpoints(tmp_path):
     assert record["success_rate"] == pytest.approx(100 * 144 / 150)
     assert record["parameters"] == 17 and record["steps"] == 30_000 and record["group"] == "ablation"
     assert record["checkpoint"].endswith("train/predvla/libero_object/seed1/checkpoints/000002/pretrained_model")
-    assert {"lerobot", "torch", "python", "machine"} <= set(record["versions"])
+    assert {"lerobot", "torch", "python", "machine", "openblas_coretype"} <= set(record["versions"])
     assert record["versions"]["omp_num_threads"] == os.environ.get("OMP_NUM_THREADS", "unset")
     a6_eval = record["commands"]["eval"]
     assert "--policy.er_iterations=0" in a6_eval and "--env.episode_length=600" in a6_eval

@@ -39,7 +39,7 @@ def sum_counts(parts: Iterable[dict[str, int]]) -> dict[str, int]:
     return {count: sum(part[count] for part in parts) for count in PAIR_COUNTS}
 
 
-def _add_pairs(tasks: dict[str, dict[str, int]], mine: dict, theirs: dict, keys: Iterable[tuple[str, int]]) -> None:
+def add_pairs(tasks: dict[str, dict[str, int]], mine: dict, theirs: dict, keys: Iterable[tuple[str, int]]) -> None:
     """Count the episode pairs `keys` of two runs (`run_episodes`) into `tasks` (task -> PAIR_COUNTS)."""
     for key in keys:
         a, b = mine[key], theirs[key]
@@ -48,15 +48,9 @@ def _add_pairs(tasks: dict[str, dict[str, int]], mine: dict, theirs: dict, keys:
             task[count] += value
 
 
-def _tested(counts: dict[str, int]) -> dict:
+def with_sign_test(counts: dict[str, int]) -> dict:
+    """PAIR_COUNTS and the exact two-sided sign test on the pairs that succeed in only one of the two runs."""
     return {**counts, "sign_test_p": sign_test(counts["only"], counts["only_against"])}
-
-
-def episode_pairs(mine: dict, theirs: dict, keys: Iterable[tuple[str, int]]) -> dict:
-    """PAIR_COUNTS and the sign test over the episode pairs `keys` of two runs (`run_episodes`), all tasks together."""
-    tasks: dict[str, dict[str, int]] = {}
-    _add_pairs(tasks, mine, theirs, keys)
-    return _tested(sum_counts(tasks.values()) if tasks else dict.fromkeys(PAIR_COUNTS, 0))
 
 
 def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
@@ -93,22 +87,22 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
                 runs = by_run[(name, suite, seed)], by_run[(against, suite, seed)]
                 mine, theirs = (run_episodes(runs_dir, c, suite, seed) for c in (name, against))
                 keys = mine.keys() & theirs.keys()
-                _add_pairs(tasks, mine, theirs, keys)
+                add_pairs(tasks, mine, theirs, keys)
                 shifted = shifted or any(r.get("object_shift") for r in runs)
                 unsettled = [unsettled_keys(r) for r in runs]
                 if settled is not None and None not in unsettled:
-                    _add_pairs(settled, mine, theirs, keys - set.union(*unsettled))
+                    add_pairs(settled, mine, theirs, keys - set.union(*unsettled))
                 else:
                     settled = None
             if tasks:
                 paired = entry.setdefault("episodes", {})[suite] = {
                     "against": against,
                     "seeds": seeds,
-                    **_tested(sum_counts(tasks.values())),
+                    **with_sign_test(sum_counts(tasks.values())),
                     "tasks": dict(sorted(tasks.items(), key=lambda item: int(item[0]))),
                 }
                 if shifted:
-                    paired["settled"] = None if settled is None else _tested(sum_counts(settled.values()))
+                    paired["settled"] = None if settled is None else with_sign_test(sum_counts(settled.values()))
     for pool in [*summary.get("pooled", {}).values(), *summary.get("pooled_sets", {}).values()]:
         for suite in summary["suites"]:
             parts = [e for name in pool["configs"] if (e := summary["configs"][name].get("episodes", {}).get(suite))]
@@ -117,7 +111,7 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
             pool.setdefault("episodes", {})[suite] = {
                 "against": " + ".join(e["against"] for e in parts),
                 "seeds": sorted({seed for e in parts for seed in e["seeds"]}),
-                **_tested(sum_counts(parts)),
+                **with_sign_test(sum_counts(parts)),
             }
 
 

@@ -14,6 +14,7 @@ from lerobot_predvla.sims.libero.hdf5_layout import file_attrs, task_file, write
 from lerobot_predvla.sims.libero.protocol import STEP_CAPS
 from lerobot_predvla.sims.libero.render import replay_observations
 from lerobot_predvla.sims.libero.rollout import run_episode
+from lerobot_predvla.utils.versions import openblas_coretype
 
 
 def episode_seed(seed: int, task_id: int, attempt: int) -> int:
@@ -99,6 +100,8 @@ def record_demos(args: argparse.Namespace) -> int:
     style = f"teleop at diversity {diversity}" if args.style == "teleop" else "scripted"
     spread = f", placements shifted by {args.placement_spread_cm} cm (std)" if args.placement_spread_cm > 0 else ""
     print(f"\nExpert success ({args.suite}, {starts}, half turn {args.half_turn}, {style}{spread}):")
+    print(f"(numpy's OpenBLAS kernels: {openblas_coretype()}; the demonstrations regenerate bit for bit only under the "
+          "same kernels, which OPENBLAS_CORETYPE pins)")
     print(f"{'task':>4}  {'attempts':>8}  {'successes':>9}  {'rate':>5}  {'steps/demo':>10}  "
           f"{'s/attempt':>9}  {'render s/demo':>13}  name")
     for spec, attempts, ok, steps, t_roll, t_render, _ in report:
