@@ -25,7 +25,7 @@ from lerobot_predvla.sweep import (
 )
 from lerobot_predvla.sweep.eval_info import EvalInfoError, parse_eval_info
 from lerobot_predvla.utils.manifest import sha256_file
-from lerobot_predvla.utils.versions import machine
+from lerobot_predvla.utils.versions import machine, openblas_coretype
 
 
 def test_runs_write_records_and_inference_variants_reuse_checkpoints(tmp_path):
@@ -286,6 +286,7 @@ def test_data_stages_and_task_by_task_evaluation_resume(tmp_path):
     assert runner.data_commands("libero_object") == []  # the dataset exists: nothing to make
     stages = json.loads((tmp_path / "runs/data/libero_object.json").read_text())
     assert list(stages) == ["demos", "frontend", "convert"] and stages["convert"]["wall_s"] >= 0
+    assert stages["demos"]["openblas_coretype"] == openblas_coretype()
     # On another machine with the finished training but no dataset, evaluating makes no data.
     import shutil
 

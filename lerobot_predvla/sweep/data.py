@@ -19,6 +19,7 @@ from lerobot_predvla.sweep.data_spec import DataSpec, fitted_suites
 from lerobot_predvla.sweep.layout import data_stages_path
 from lerobot_predvla.sweep.workspace import Workspace
 from lerobot_predvla.utils.io import atomic_write_json
+from lerobot_predvla.utils.versions import openblas_coretype
 
 
 def style_args(spec: DataSpec) -> list[str]:
@@ -167,6 +168,7 @@ class DataStages(Workspace):
         """Run the missing data stages of `suite` (the `demos[.<suite>].tasks<k>` shares of `data.workers` at once),
         recording each one's command and wall time in `RUNS_DIR/data/<suite>.json`; False when one failed."""
         stages_file = data_stages_path(self.runs_dir, suite)
+        kernels = openblas_coretype()  # the stages' processes inherit this process's environment and processor
 
         def run_stage(stage: str, command: list[str]) -> tuple[str, list[str], int, float]:
             start = time.monotonic()
@@ -179,8 +181,8 @@ class DataStages(Workspace):
                 finished = list(pool.map(lambda item: run_stage(*item), group))
             stages = json.loads(stages_file.read_text()) if stages_file.is_file() else {}
             for stage, command, code, wall in finished:
-                if code == 0:
-                    stages[stage] = {"command": command, "wall_s": round(wall, 1)}
+                if code == 0:  # with the OpenBLAS kernels the stage ran under: demonstrations depend on them
+                    stages[stage] = {"command": command, "wall_s": round(wall, 1), "openblas_coretype": kernels}
             atomic_write_json(stages_file, stages)
             failed = [(stage, code) for stage, _, code, _ in finished if code != 0]
             for stage, code in failed:
