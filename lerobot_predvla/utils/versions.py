@@ -26,26 +26,25 @@ def package_versions(distributions: tuple[str, ...] = RUN_DISTRIBUTIONS) -> dict
     return {"python": sys.version.split()[0], **{d: package_version(d) for d in distributions}}
 
 
-def cpu_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> set[str]:
-    """The processor's instruction-set flags (empty where /proc/cpuinfo is missing)."""
+def _cpuinfo_value(key: str, cpuinfo: Path) -> str | None:
+    """The first `key : value` line's value in /proc/cpuinfo; None where the file or the key is missing."""
     if cpuinfo.is_file():
         for line in cpuinfo.read_text(errors="replace").splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() == "flags":
-                return set(value.split())
-    return set()
+            name, _, value = line.partition(":")
+            if name.strip() == key:
+                return value.strip()
+    return None
+
+
+def cpu_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> set[str]:
+    """The processor's instruction-set flags (empty where /proc/cpuinfo is missing)."""
+    return set((_cpuinfo_value("flags", cpuinfo) or "").split())
 
 
 def machine(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
     """The processor a result's wall times were measured on: model, logical CPUs, and whether it has the AVX-512
     bfloat16 instructions (machines of the same core count differ in speed; wall times compare only on one)."""
-    model = platform.processor() or platform.machine()
-    if cpuinfo.is_file():
-        for line in cpuinfo.read_text(errors="replace").splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() == "model name":
-                model = value.strip()
-                break
+    model = _cpuinfo_value("model name", cpuinfo) or platform.processor() or platform.machine()
     bf16 = "avx512_bf16" in cpu_flags(cpuinfo)
     return f"{model}, {os.cpu_count()} logical CPUs, AVX-512 bf16: {'yes' if bf16 else 'no'}"
 
