@@ -75,7 +75,8 @@ def approach(actions: np.ndarray) -> tuple[np.ndarray, int | None]:
 
 @dataclass
 class TraceRun:
-    """One `predvla trace` directory: its task, its episodes' raw actions (episode i is official init state i)."""
+    """One `predvla trace` directory: its task, its episodes' raw actions (episode i is official init state i, or
+    the i-th randomised reset of its seed)."""
 
     path: Path
     task_id: int
@@ -89,6 +90,16 @@ class TraceRun:
     def output_dir(self) -> Path:
         """lerobot-eval's output directory of the trace (its eval_info.json)."""
         return Path(_arg(self.eval_args, "output_dir") or self.path / "eval")
+
+    @property
+    def official_states(self) -> bool:
+        """Whether the episodes start from the official init states (else from randomised resets)."""
+        return _arg(self.eval_args, "env.init_states") == "true"
+
+    @property
+    def seed(self) -> str | None:
+        """lerobot-eval's --seed of the trace (None: its default)."""
+        return _arg(self.eval_args, "seed")
 
     def command(self) -> str:
         """The `predvla trace` command that made this directory (its output directory left to the default)."""
@@ -104,9 +115,10 @@ def _arg(eval_args: list[str], name: str) -> str | None:
     return None
 
 
-def load_trace_run(directory: Path) -> TraceRun:
-    """Read a trace of one task on the official init states (`--env.init_states=true`, one `--env.task_ids`), and
-    turn its actions into raw units with the checkpoint's own postprocessor (as lerobot-eval does)."""
+def load_trace_run(directory: Path, official_states: bool = True) -> TraceRun:
+    """Read a trace of one task (one `--env.task_ids`) on the official init states (`--env.init_states=true`; with
+    `official_states=False` also on randomised resets), and turn its actions into raw units with the checkpoint's
+    own postprocessor (as lerobot-eval does)."""
     path = Path(directory) / "trace.json"
     try:
         trace = json.loads(path.read_text())
@@ -114,9 +126,10 @@ def load_trace_run(directory: Path) -> TraceRun:
     except (OSError, ValueError, KeyError) as err:
         raise ValueError(f"{path}: expected the trace.json of `predvla trace` ({err}).") from err
     task_ids = re.findall(r"\d+", _arg(eval_args, "env.task_ids") or "")
-    if len(task_ids) != 1 or _arg(eval_args, "env.init_states") != "true":
-        raise ValueError(f"{path}: expected a trace of one task (--env.task_ids=[K]) on the official init states "
-                         f"(--env.init_states=true); its arguments are {eval_args}.")
+    if len(task_ids) != 1 or (official_states and _arg(eval_args, "env.init_states") != "true"):
+        starts = " on the official init states (--env.init_states=true)" if official_states else ""
+        raise ValueError(f"{path}: expected a trace of one task (--env.task_ids=[K]){starts}; its arguments are "
+                         f"{eval_args}.")
     checkpoint = _arg(eval_args, "policy.path")
     if checkpoint is None or not (Path(checkpoint) / POSTPROCESSOR_FILE).is_file():
         raise ValueError(f"{path}: its --policy.path ({checkpoint}) has no {POSTPROCESSOR_FILE}.")

@@ -4,7 +4,8 @@ episode.
 Exact open loop reads no observation, so on every official init state of a task it commands one action sequence
 whose plan switches phase at fixed steps: the gripper closes (`gripper_events`: the gripper command turns positive in
 raw units), then the lift starts (the first step at or after the close whose z action exceeds LIFT_Z). Error
-regression, traced on the same starts (`predvla trace`, episode i from official init state i), runs the same plan
+regression, traced on the same starts (`predvla trace`, episode i from official init state i, or from the i-th
+randomised reset of the evaluation's seed with `--env.init_states=false`), runs the same plan
 with its posteriors moved by the observations, and can switch a phase a step earlier or later. Per start this
 compares its phase steps with the open loop's and relates the lift's shift to the episode's outcome: Fisher's exact
 test, one-sided, of failure against a lift started before the open loop's, on the starts chosen as the test set.
@@ -43,6 +44,7 @@ from research.er_correction import TraceRun, close_step, load_trace_run
 Z = 2  # the OSC z position delta
 LIFT_Z = 0.5  # raw z action above which the hand rises (the plan's lift commands about +1, its descent about -0.3)
 REPORT_JSON, REPORT_MD, FIGURE = "timing.json", "timing.md", "timing.png"
+OFFICIAL = "official init states"  # the report's `starts` on the official init states
 COMMAND = "python -m research.er_timing"
 
 
@@ -74,7 +76,7 @@ def episode_timings(er: TraceRun, successes: list[bool]) -> list[EpisodeTiming]:
     if len(successes) < len(er.actions):
         raise ValueError(f"{er.path}: {len(er.actions)} traced episodes, but the outcomes name {len(successes)}.")
     rows = []
-    for state, actions in enumerate(er.actions):
+    for state, actions in enumerate(er.actions):  # state: the official init state, or the reset's episode index
         close = close_step(actions)
         rows.append(EpisodeTiming(state, close, lift_step(actions, close), successes[state]))
     return rows
@@ -103,7 +105,7 @@ def markdown(report: dict) -> str:
              "Exact open loop closes the gripper at step {close} and starts the lift (z action above {z}) at step "
              "{lift}, on every start.".format(close=ol["close"], lift=ol["lift"], z=LIFT_Z), "",
              "Reproduce:", "", "```bash", *report["commands"], "```", "",
-             "| set | official init states | episodes | " + "early lift: failed / succeeded | "
+             f"| set | {report['starts']} | episodes | " + "early lift: failed / succeeded | "
              "not early: failed / succeeded | odds ratio | p (Fisher, one-sided) |", "|---|---|---|---|---|---|---|"]
     for name, t in tests.items():
         (a, b), (c, d) = t["table"]
@@ -111,8 +113,9 @@ def markdown(report: dict) -> str:
         span = f"{states[0]}-{states[-1]}" if states == list(range(states[0], states[-1] + 1)) else str(states)
         lines.append(f"| {name} | {span} | {a + b + c + d} | {a} / {b} | {c} / {d} | {t['odds_ratio']:.3g} | "
                      f"{t['p']:.2g} |")
+    start = "state" if report["starts"] == OFFICIAL else "reset"
     lines += ["", "Per start (steps; - where the event does not happen):", "",
-              "| state | close | lift | lift - open loop's | success |", "|---|---|---|---|---|"]
+              f"| {start} | close | lift | lift - open loop's | success |", "|---|---|---|---|---|"]
     for e in report["episodes"]:
         shift = "-" if e["lift"] is None else f"{e['lift'] - ol['lift']:+d}"
         lines.append(f"| {e['state']} | {e['close'] if e['close'] is not None else '-'} | "
@@ -171,9 +174,10 @@ def write_report(out: Path, er: TraceRun, open_loop: TraceRun, successes: list[b
     if test_states is not None:
         missing = sorted(set(test_states) - set(every))
         if missing:
-            raise ValueError(f"--test-states: official init states {missing} were not traced (0-{len(every) - 1}).")
+            raise ValueError(f"--test-states: starts {missing} were not traced (0-{len(every) - 1}).")
         tests["test starts"] = early_lift_test(episodes, ol_lift, test_states)
-    report = {"task_id": er.task_id, "checkpoint": er.checkpoint, "lift_z": LIFT_Z,
+    starts = OFFICIAL if er.official_states else f"randomised resets of seed {er.seed}"
+    report = {"task_id": er.task_id, "checkpoint": er.checkpoint, "starts": starts, "lift_z": LIFT_Z,
               "open_loop": {"close": ol_close, "lift": ol_lift}, "tests": tests,
               "episodes": [asdict(e) for e in episodes], "commands": commands}
     out.mkdir(parents=True, exist_ok=True)
@@ -186,14 +190,16 @@ def write_report(out: Path, er: TraceRun, open_loop: TraceRun, successes: list[b
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=COMMAND, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--trace", type=Path, required=True, metavar="DIR",
-                   help="`predvla trace` OUT of error regression on one task, official init states 0..n-1")
+                   help="`predvla trace` OUT of error regression on one task, official init states 0..n-1 or "
+                        "randomised resets")
     p.add_argument("--open-loop", type=Path, required=True, metavar="DIR",
                    help="`predvla trace` OUT of the same checkpoint with --policy.er_iterations=0, same task")
     p.add_argument("--outcomes", type=Path, metavar="EVAL_INFO",
                    help="eval_info.json whose successes of this task are the episodes' outcomes "
                         "(default: the trace's own evaluation)")
     p.add_argument("--test-states", metavar="A-B",
-                   help="official init states of the test set, e.g. 10-49 (default: only every traced start)")
+                   help="starts of the test set (official init states or the resets' episode indices), e.g. "
+                        "10-49 (default: only every traced start)")
     p.add_argument("--out", type=Path, required=True, help="directory for timing.json/.md/.png")
     return p
 
@@ -213,7 +219,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         test_states = state_range(args.test_states) if args.test_states else None
-        er, open_loop = load_trace_run(args.trace), load_trace_run(args.open_loop)
+        er = load_trace_run(args.trace, official_states=False)
+        open_loop = load_trace_run(args.open_loop, official_states=False)
         if er.open_loop:
             raise ValueError(f"--trace {er.path} ran with --policy.er_iterations=0 (exact open loop).")
         if not open_loop.open_loop:

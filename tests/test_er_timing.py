@@ -8,6 +8,7 @@ import pytest
 from trace_factory import raw_actions, trace_checkpoint, write_trace
 
 from research import er_timing as et
+from research.er_correction import load_trace_run
 
 
 def lifting(close_at: int, lift_at: int, steps: int = 14) -> np.ndarray:
@@ -93,3 +94,24 @@ def test_bad_input_is_named_and_nothing_is_written(traces, capsys):
         assert et.main([*[x for kv in args.items() for x in kv]]) == 2, extra
         assert message in capsys.readouterr().err, extra
     assert not (traces / "out").exists()
+
+
+def test_randomised_resets_are_timed_and_named_as_such(tmp_path, capsys):
+    """A trace on randomised resets (`--env.init_states=false`) is timed like one on the official init states; the
+    report names its starts, and er_correction, which runs the expert from official init states, still refuses it."""
+    checkpoint = trace_checkpoint(tmp_path / "ckpt")
+    write_trace(tmp_path / "ol", checkpoint, [lifting(4, 8)], open_loop=True, init_states="false")
+    write_trace(tmp_path / "er", checkpoint, [lifting(4, 7), lifting(4, 9)], init_states="false")
+    trace = json.loads((tmp_path / "er" / "trace.json").read_text())
+    trace["eval_args"].append("--seed=3000")
+    (tmp_path / "er" / "trace.json").write_text(json.dumps(trace))
+    write_outcomes(tmp_path / "er" / "eval" / "eval_info.json", [False, True])
+    assert et.main(["--trace", str(tmp_path / "er"), "--open-loop", str(tmp_path / "ol"),
+                    "--out", str(tmp_path / "out")]) == 0
+    report = json.loads((tmp_path / "out" / et.REPORT_JSON).read_text())
+    assert report["starts"] == "randomised resets of seed 3000"
+    assert report["tests"]["all traced starts"]["table"] == [[1, 0], [0, 1]]
+    text = capsys.readouterr().out
+    assert "| set | randomised resets of seed 3000 |" in text and "| reset | close |" in text
+    with pytest.raises(ValueError, match="official init states"):
+        load_trace_run(tmp_path / "er")
