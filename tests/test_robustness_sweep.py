@@ -200,6 +200,8 @@ def test_the_robustness_section_repeats_cells_and_paired_comparisons_without_the
     shift2 = {"object_shift": {"cm": 2}, "shift_unsettled": 1}  # records that kept the count alone
     _write_run(runs, "ol2", ol, label="OL", **shift2)
     _write_run(runs, "er2", er, label="ER", compare_to="ol2", **shift2)
+    for name in ("zr4", "cr4", "mr4"):  # more policies at one condition: their rows by configuration name
+        _write_run(runs, name, ol, label=name.upper(), compare_to="ol4", **shift4)
     _write_run(runs, "ol_swap", ol, label="OL", variant="pro_swap")
     _write_run(runs, "er_swap", er, label="ER", compare_to="ol_swap", variant="pro_swap")
     summary = write_report(runs, tmp_path / "report")
@@ -224,6 +226,8 @@ def test_the_robustness_section_repeats_cells_and_paired_comparisons_without_the
     assert f"| ER | OL | object | pro_swap | 6 | 1 / 3 / 1 / 1 | {p} | 6 | 1 / 3 / 1 / 1 | {p} |" in section
     rows = [line for line in section.splitlines() if line.startswith("| ER | OL |")]
     assert [row.split(" | ")[3] for row in rows] == ["2 cm", "4 cm", "pro_swap"]  # shifts by distance, then variants
+    at4 = [line.split(" | ")[0] for line in section.splitlines() if "| OL | object | 4 cm |" in line]
+    assert at4 == ["| CR4", "| ER", "| MR4", "| ZR4"]  # not in the order of a set of names
 
 
 def test_an_extended_record_keeps_the_unsettled_episodes_of_each_call_or_says_they_are_unknown(tmp_path):

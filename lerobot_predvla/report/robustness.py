@@ -128,10 +128,11 @@ def _quadrants(pairs: dict | None) -> list[str]:
 def robustness_pairs_table(records: list[dict], summary: dict) -> str | None:
     """Every configuration of the robustness table with `compare_to`, paired episode by episode with it
     (`paired.paired_episodes`) per condition and suite, over all pairs and over the pairs whose shifted object settled
-    in both runs (a variant shifts nothing: all its pairs); None without such pairs."""
+    in both runs (a variant shifts nothing: all its pairs); rows by condition, then by configuration name; None without
+    such pairs."""
     conditions = {r["config"]: key for r in records if (key := condition(r)) is not None}
     rows = []
-    for name in sorted(conditions.keys() & summary["configs"].keys(), key=lambda n: conditions[n]):
+    for name in sorted(conditions.keys() & summary["configs"].keys(), key=lambda n: (conditions[n], n)):
         entry = summary["configs"][name]
         for suite, pairs in entry.get("episodes", {}).items():
             against = summary["configs"].get(pairs["against"], {}).get("label") or pairs["against"]
