@@ -25,7 +25,7 @@ from lerobot_predvla.sims.libero.oracle import fit_oracle
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "convert",
-        help="Convert a LIBERO hdf5 suite or a LeRobot dataset into a LeRobot dataset with cached PredVLA features.",
+        help="convert a LIBERO hdf5 suite or a LeRobot dataset into a LeRobot dataset with cached PredVLA features",
         description=__doc__,
     )
     parser.add_argument("--hdf5-root", type=Path, default=None, help="Directory with <suite>/*_demo.hdf5.")

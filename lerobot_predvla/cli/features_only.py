@@ -10,7 +10,7 @@ from lerobot_predvla.data.features_only import features_only_copy
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "features-only",
-        help="Copy a converted dataset without its camera frames, for training (no video decoding per sample).",
+        help="copy a converted dataset without its camera frames, for training (no video decoding per sample)",
         description=__doc__,
     )
     parser.add_argument("--dataset-root", type=Path, required=True, help="Dataset written by `predvla convert`.")

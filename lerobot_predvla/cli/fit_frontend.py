@@ -26,7 +26,7 @@ ENCODING_OPTIONS = ("language_dim", "vision_dim_per_camera", "precision", "frame
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "fit-frontend",
-        help="Fit the frozen front end's PCA bases on LIBERO hdf5 demonstrations or a LeRobot dataset.",
+        help="fit the frozen front end's PCA bases on LIBERO hdf5 demonstrations or a LeRobot dataset",
         description=__doc__,
     )
     parser.add_argument(

@@ -16,7 +16,7 @@ from lerobot_predvla.report import SUMMARY_FILE, load_summary
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "push",
-        help="Publish a checkpoint (weights, config, processors, front end, model card) on the Hub.",
+        help="publish a checkpoint (weights, config, processors, front end, model card) on the Hub",
         description=__doc__ + " The training posteriors and optimizer state are never published.",
     )
     parser.add_argument("checkpoint", type=Path, help="A checkpoint (e.g. outputs/RUN/checkpoints/last) or its "

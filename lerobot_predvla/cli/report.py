@@ -13,8 +13,8 @@ from lerobot_predvla.report.headline import README, RESULTS_DOC, update_docs
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "report",
-        help="Tables (mean ± std across seeds, suite means, paired deltas, ladder) and figures from sweep runs; "
-             "--docs: the README's and docs/results.md's headline table.",
+        help="tables (mean ± std across seeds, suite means, paired deltas, ladder) and figures from sweep runs; "
+             "--docs: the README's and docs/results.md's headline table",
         description=__doc__,
     )
     parser.add_argument("runs_dir", type=Path, nargs="?",

@@ -19,7 +19,7 @@ def _names(text: str) -> list[str]:
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "sweep",
-        help="Run lerobot-train + lerobot-eval for every configuration x suite x seed of a sweep file.",
+        help="run lerobot-train + lerobot-eval for every configuration x suite x seed of a sweep file",
         description=__doc__ + " Defaults follow the paper (50 rollouts per task from the official initial "
         "states, 600-step cap, 30,000 training steps, batch 32); the flags below shrink them.",
     )
