@@ -121,7 +121,7 @@ def test_headline_reference_row_comes_from_the_blind_replay_report(tmp_path):
     row = next(line for line in readme.splitlines() if "one demonstration replayed blind" in line)
     assert f"| {100 * s0 / n0:.1f} ({s0}/{n0}); from the nearest-mean start {100 * s1 / n1:.1f} ({s1}/{n1}) |" in row
     assert "results/blind_replay/report.md" in row
-    for suite, paper in headline.PAPER_OPEN_LOOP.items():  # per suite on the detailed page only
+    for suite, (paper, _) in headline.PAPER_OPEN_LOOP.items():  # per suite on the detailed page only
         assert f"| {suite} ({headline.SUITE_LABELS[suite]}) | {paper:.2f} |" in results
         assert f"| {suite} ({headline.SUITE_LABELS[suite]}) |" not in readme
     # The detailed page: per task beside the leading row's exact open loop, counted from its eval_info files.

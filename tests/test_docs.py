@@ -212,6 +212,50 @@ def test_a_row_of_teleop_demonstrations_names_its_data_its_tasks_and_its_own_bli
         update_docs(tmp_path)
 
 
+def test_the_four_suites_join_the_headline_beside_the_papers_table_3_once_their_report_exists(tmp_path):
+    """The four-suite sweep's report adds one table to both headline blocks: the paper's Table 3 and Table 6 (A6)
+    rows, one demonstration replayed blind per suite, then the sweep's configurations per suite, with 3-suite
+    (spatial, goal, object) and 4-suite means only where every suite they average has a value."""
+    for name in ("configs", "results/libero_object_cpu/runs/records", "results/blind_replay"):
+        shutil.copytree(REPO / name, tmp_path / name)
+    shutil.copy(REPO / "results/libero_object_cpu/report.json", tmp_path / "results/libero_object_cpu/report.json")
+    (tmp_path / "docs").mkdir()
+    for name in (README, RESULTS_DOC):
+        (tmp_path / name).write_text(f"intro\n{HEADLINE_START}\n{HEADLINE_END}\nend\n")
+    update_docs(tmp_path)
+    assert "All four suites" not in _block(tmp_path / README)  # no four-suite report yet: libero_object alone
+
+    def cell(*rates: float) -> dict:
+        return {"mean": sum(rates) / len(rates), "std": None if len(rates) == 1 else 5.0, "n": len(rates),
+                "planned": len(rates), "seeds": {str(i): r for i, r in enumerate(rates)}, "missing_seeds": []}
+
+    suites = {"libero_spatial": cell(60.0), "libero_goal": cell(70.0), "libero_object": cell(80.0)}
+    atomic_write_json(tmp_path / "results/libero_four_suites/report.json", {"configs": {
+        "olt": {"label": "PredVLA fit_sensory_olt, Table 2 ER", "suites": suites, "mean3": 70.0, "mean4": None},
+        "B2": {"label": "BC-RNN (B2)", "suites": {**suites, "libero_10": cell(20.0)}, "mean3": 70.0,
+               "mean4": 57.5}}})
+    assert [p.name for p in update_docs(tmp_path)] == ["README.md", "results.md"]
+    block = _block(tmp_path / README)
+    lines = block[block.index("All four suites"):].splitlines()
+    assert "| LIBERO success (%), mean ± std over training seeds | spatial | goal | object | long | 3-suite mean " \
+           "| 4-suite mean |" in lines
+    # The paper's PredVLA: (83.19 + 88.40 + 89.24) / 3 and with long's 40.57 / 4, the paper's 86.9 and 75.4.
+    assert ("| paper: PredVLA, error regression (Table 3, 14 seeds) | 83.19 ± 6.10 | 88.40 ± 3.83 | 89.24 ± 6.13 "
+            "| 40.57 ± 6.44 | 86.94 | 75.35 |") in lines
+    assert "| paper: PredVLA, exact open loop (Table 6, A6, 7 seeds) | 73.79 ± 4.38 | 78.50 ± 9.14 |" in block
+    blind = json.loads((REPO / "results/blind_replay/report.json").read_text())
+    s, n = (sum(t[k] for t in blind["libero_goal"].values()) for k in ("successes", "episodes"))
+    row = next(line for line in lines if line.startswith("| reference, not a policy"))
+    assert f"| {100 * s / n:.1f} ({s}/{n}) |" in row
+    assert "| this project: PredVLA fit_sensory_olt, Table 2 ER | 60.00 (n = 1) | 70.00 (n = 1) | 80.00 (n = 1) " \
+           "| — | 70.00 | — |" in lines
+    assert "| this project: BC-RNN (B2) | 60.00 (n = 1) | 70.00 (n = 1) | 80.00 (n = 1) | 20.00 (n = 1) | 70.00 " \
+           "| 57.50 |" in lines
+    assert "results/libero_four_suites/report.md" in block and "../results/libero_four_suites/report.md" in _block(
+        tmp_path / RESULTS_DOC)
+    assert update_docs(tmp_path, check=True) == []
+
+
 def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys):
     shutil.copytree(REPO / "configs", tmp_path / "configs")
     for exp in {e.results for e in EXPERIMENTS}:
