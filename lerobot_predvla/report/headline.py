@@ -38,6 +38,7 @@ from lerobot_predvla.sims.libero.protocol import (
     PAPER_OBJECT,
     SUITE_LABELS,
 )
+from lerobot_predvla.sweep.data_spec import fitted_suites
 from lerobot_predvla.sweep.spec import PAPER_BATCH_SIZE, PAPER_TRAIN_STEPS, Sweep, SweepError
 from lerobot_predvla.utils.io import atomic_write_bytes
 from lerobot_predvla.utils.manifest import MANIFEST_FILE, listed_files, manifest_text
@@ -213,6 +214,11 @@ def _demonstrations(sweep: Sweep) -> tuple[str, list[tuple[str, Departure]]]:
             "the paper: LIBERO's placements")))
     if data.vision_weights == "random":
         departures.append(("front end", Departure("a randomly initialised ResNet18", "the paper: ImageNet weights")))
+    fitted_on = fitted_suites(sweep.settings.data, SUITE)
+    if set(fitted_on) != set(SUITES):
+        departures.append(("front end", Departure(
+            f"PCA bases fitted on {', '.join(fitted_on)}'s demonstrations only",
+            "the paper: fitted jointly on the four suites' training demonstrations")))
     return ", ".join(words), departures
 
 
