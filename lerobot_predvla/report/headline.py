@@ -28,7 +28,7 @@ from lerobot_predvla.columns import SUITES
 from lerobot_predvla.hub.upload import repository_files, shipped_checkpoints
 from lerobot_predvla.policies.recipe import Departure, config_departures
 from lerobot_predvla.report.formatting import MISSING, fmt_mean_std, fmt_rate, table
-from lerobot_predvla.report.headline_suites import PAPER_OPEN_LOOP, four_suite_table
+from lerobot_predvla.report.headline_suites import four_suite_table
 from lerobot_predvla.report.results import SUMMARY_FILE, ReportError, load_summary, run_episodes
 from lerobot_predvla.sims.libero import blind_replay
 from lerobot_predvla.sims.libero.expert.teleop import DEFAULT_STYLE
@@ -36,6 +36,7 @@ from lerobot_predvla.sims.libero.protocol import (
     PAPER_EPISODE_LENGTH,
     PAPER_EPISODES_PER_TASK,
     PAPER_OBJECT,
+    PAPER_OPEN_LOOP,
     SUITE_LABELS,
 )
 from lerobot_predvla.sweep.data_spec import fitted_suites

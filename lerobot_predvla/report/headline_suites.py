@@ -14,7 +14,7 @@ from lerobot_predvla.report.formatting import MISSING, fmt_mean_std, fmt_num, fm
 from lerobot_predvla.report.results import SUMMARY_FILE, ReportError, load_summary
 from lerobot_predvla.report.tables import fmt_cell
 from lerobot_predvla.sims.libero import blind_replay
-from lerobot_predvla.sims.libero.protocol import SHORT_SUITES, SUITE_LABELS
+from lerobot_predvla.sims.libero.protocol import PAPER_OPEN_LOOP, SHORT_SUITES, SUITE_LABELS
 from lerobot_predvla.sweep.spec import Sweep, SweepError
 from lerobot_predvla.utils.statistics import percent
 
@@ -22,9 +22,6 @@ RESULTS = "libero_four_suites"
 SWEEP = "configs/sweeps/libero_four_suites.yaml"
 PAPER_SWEEP = "configs/sweeps/paper.yaml"
 COLUMNS = (*SHORT_SUITES, "libero_10")  # the paper's order (Table 3)
-# The paper's exact open loop per suite (Table 6, A6: n_itr = 0 on the intact model, seven seeds): (mean, std).
-PAPER_OPEN_LOOP = {"libero_spatial": (73.79, 4.38), "libero_goal": (78.50, 9.14), "libero_object": (78.14, 4.53),
-                   "libero_10": (28.00, 6.62)}
 # The paper's published rows, by the configuration of PAPER_SWEEP whose `paper` field holds them.
 PAPER_ROWS = (("paper: PredVLA, error regression (Table 3, 14 seeds)", "predvla"),
               ("paper: BC-Transformer (Table 4)", "B1"), ("paper: BC-RNN (Table 4)", "B2"))
