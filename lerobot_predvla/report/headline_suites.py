@@ -7,11 +7,10 @@ headline shows libero_object alone."""
 
 from pathlib import Path
 
-import numpy as np
-
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.report.formatting import MISSING, fmt_mean_std, fmt_num, fmt_rate, table
 from lerobot_predvla.report.results import SUMMARY_FILE, ReportError, load_summary
+from lerobot_predvla.report.summary import suites_mean
 from lerobot_predvla.report.tables import fmt_cell
 from lerobot_predvla.sims.libero import blind_replay
 from lerobot_predvla.sims.libero.protocol import PAPER_OPEN_LOOP, SHORT_SUITES, SUITE_LABELS
@@ -30,12 +29,9 @@ OUR_CONFIGS = ("olt", "olt_open_loop", "olt_carried", "B1", "B2")
 
 
 def _means(values: dict[str, float]) -> list[str]:
-    """The 3-suite and 4-suite means of per-suite values; `—` unless every suite they average has one."""
-    out = []
-    for suites in (SHORT_SUITES, SUITES):
-        have = [values[s] for s in suites if s in values]
-        out.append(fmt_num(float(np.mean(have))) if len(have) == len(suites) else MISSING)
-    return out
+    """The 3-suite and 4-suite means of per-suite values (`summary.suites_mean`, as the report's); `—` unless every
+    suite they average has one."""
+    return [fmt_num(suites_mean([{"mean": values.get(s)} for s in suites])) for suites in (SHORT_SUITES, SUITES)]
 
 
 def _published_row(label: str, values: dict[str, tuple[float, float]]) -> list[str]:
