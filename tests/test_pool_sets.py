@@ -47,6 +47,12 @@ def test_a_pool_of_other_comparisons_or_of_one_set_twice_is_refused(tmp_path, ch
         Sweep.load(sweep_file(tmp_path, configs=configs(**changes)))
 
 
+def test_a_pooled_configurations_unknown_compare_to_is_named_not_a_key_error(tmp_path):
+    """The pool's check follows each listed configuration's compare_to, so references are checked before it."""
+    with pytest.raises(SweepError, match="configuration ol_shifted refers to unknown configuration 'nope'"):
+        Sweep.load(sweep_file(tmp_path, configs=configs(ol_shifted={"compare_to": "nope"})))
+
+
 def test_a_configuration_in_two_pools_is_refused(tmp_path):
     entries = configs()
     entries.append({**entries[-1], "name": "ol_shifted_again", "compare_to": "er_shifted", "pool_sets": ["ol_shifted"],

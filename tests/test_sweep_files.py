@@ -341,6 +341,33 @@ def test_d3_is_also_evaluated_from_resets_placed_like_its_demonstrations(tmp_pat
     assert arg(command, "env.placement_spread_cm") == "3" and arg(command, "env.render_interval") == "100000"
 
 
+@pytest.mark.parametrize("dataset, chosen", [("teleop", ("olt", "B2")), ("teleop_placed", ("table2", "B1"))])
+def test_a_full_scale_run_file_is_its_screen_restricted_to_the_chosen_cells(dataset, chosen):
+    """D2's and D3's full-scale files (demonstrations.md, "Decision rules for full scale"): the screen's dataset and
+    data stage, its entries of the chosen PredVLA recipe and BC only, unchanged but for the BC's 50,000 steps and its
+    pairing with the chosen PredVLA's open loop; 30,000 steps, 20 episodes on all ten tasks, published apart."""
+    sweeps = Path(__file__).parents[1] / "configs" / "sweeps"
+    screen = Sweep.load(sweeps / f"libero_object_demos_{dataset}.yaml")
+    full = Sweep.load(sweeps / f"libero_object_demos_{dataset}_full.yaml")
+    predvla, bc = chosen
+
+    def of(name: str, recipe: str) -> bool:
+        return name == recipe or name.startswith(f"{recipe}_")
+
+    assert sorted(full.configs) == sorted(n for n in screen.configs if of(n, predvla) or of(n, bc))
+    for name, spec in full.configs.items():
+        expected = dict(vars(screen.configs[name]))
+        if of(name, bc):
+            expected["compare_to"] = expected["compare_to"].replace("olt_", f"{predvla}_", 1)
+            expected["steps"] = 50000 if name == bc else None
+        assert vars(spec) == expected, name
+    differing = {k for k, v in vars(full.settings).items() if k != "data" and v != getattr(screen.settings, k)}
+    assert differing == {"steps", "n_episodes", "eval_tasks", "publish"}
+    assert (full.settings.steps, full.settings.n_episodes, full.settings.eval_tasks) == (30000, 20, list(range(10)))
+    assert full.settings.publish == screen.settings.publish.replace(f"/{dataset}/", f"/{dataset}_full/")
+    assert {k: vars(v) for k, v in full.settings.data.items()} == {k: vars(v) for k, v in screen.settings.data.items()}
+
+
 def test_the_four_suite_sweep_fits_one_front_end_on_all_four_suites(tmp_path):
     """libero_four_suites.yaml: Table 2's data settings for every suite, one front end fitted on all four suites'
     demonstrations (libero_object's read where Table 2's data stage made them), each suite converted with it."""

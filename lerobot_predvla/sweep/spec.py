@@ -321,6 +321,7 @@ class Sweep:
         return sweep
 
     def validate(self, where: Path) -> None:
+        # Every reference first: the checks below follow them across configurations (a pool's compare_to's).
         for spec in self.configs.values():
             if spec.group not in GROUPS:
                 raise SweepError(f"{where}: configuration {spec.name}: group {spec.group!r} is not one of {GROUPS}.")
@@ -328,6 +329,7 @@ class Sweep:
                         *(spec.pool_sets if isinstance(spec.pool_sets, list) else [])):
                 if ref is not None and ref not in self.configs:
                     raise SweepError(f"{where}: configuration {spec.name} refers to unknown configuration {ref!r}.")
+        for spec in self.configs.values():
             if spec.checkpoint_from and (spec.train_args or spec.policy_overrides or spec.suite_overrides):
                 raise SweepError(
                     f"{where}: configuration {spec.name} evaluates {spec.checkpoint_from}'s checkpoints; "
