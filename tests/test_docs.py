@@ -58,7 +58,8 @@ def test_headline_cells_are_the_report_json_seeds():
     """Each cell against report.json read here directly: single seeds say n = 1, never ± 0."""
     summary = json.loads((REPO / "results/libero_object_cpu/report.json").read_text())
     cells = {name: summary["configs"][name]["suites"]["libero_object"] for name in ("predvla_cpu_8k", "B2")}
-    row = next(line for line in _block(REPO / README).splitlines() if "results/libero_object_cpu/report.md" in line)
+    rows = _block(REPO / RESULTS_DOC).splitlines()
+    row = next(line for line in rows if "results/libero_object_cpu/report.md" in line)
     for cell in cells.values():
         assert cell["n"] == 1
         assert f"| {cell['mean']:.1f} (n = 1) |" in row
@@ -70,7 +71,7 @@ def test_headline_cells_are_the_report_json_seeds():
         seeds.update(wrist[name]["suites"]["libero_object"]["seeds"])
     mean = sum(seeds.values()) / len(seeds)
     assert len(seeds) == 3
-    assert f"{mean:.1f} ± " in _block(REPO / README) and f"(n = {len(seeds)})" in _block(REPO / README)
+    assert f"{mean:.1f} ± " in _block(REPO / RESULTS_DOC) and f"(n = {len(seeds)})" in _block(REPO / RESULTS_DOC)
 
 
 def test_departures_are_one_table_of_the_rows_they_apply_to():
@@ -93,7 +94,8 @@ def _record(config: str, seed: int, successes: int, episodes: int = 500) -> dict
 
 def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
     """The Table 2 row appears first as soon as results/libero_object_table2/report.json exists, with the seeds of
-    the configurations that pool with its columns' (`pool_with`, as report.json lists them)."""
+    the configurations that pool with its columns' (`pool_with`, as report.json lists them). The CPU recipe's row is
+    on docs/results.md only: the README numbers its own rows and says which it left out."""
     for name in ("configs", "results/libero_object_cpu/runs/records"):
         shutil.copytree(REPO / name, tmp_path / name)
     shutil.copy(REPO / "results/libero_object_cpu/report.json", tmp_path / "results/libero_object_cpu/report.json")
@@ -101,8 +103,11 @@ def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
     for name in (README, RESULTS_DOC):
         (tmp_path / name).write_text(f"intro\n{HEADLINE_START}\n{HEADLINE_END}\nend\n")
     assert [p.name for p in update_docs(tmp_path)] == ["README.md", "results.md"]
-    before = _block(tmp_path / README)
+    before = _block(tmp_path / RESULTS_DOC)
     assert "results/libero_object_cpu/report.md" in before and "libero_object_table2" not in before
+    readme = _block(tmp_path / README)
+    assert "libero_object_cpu/report.md" not in readme and "The paper reports" not in readme  # no row of its own
+    assert "Row 1 of [docs/results.md](docs/results.md#libero-libero_object-against-the-paper) (CPU recipe)" in readme
 
     table2 = tmp_path / "results/libero_object_table2"
     runs = {("predvla_table2", 0): 400, ("predvla_table2_seeds", 1): 300, ("predvla_table2_seeds", 2): 350,
@@ -116,15 +121,18 @@ def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
     atomic_write_json(table2 / "report.json", {"configs": configs, "pooled": {
         "predvla_table2": {"configs": ["predvla_table2", "predvla_table2_seeds"]}}})
     update_docs(tmp_path)
-    rows = [line for line in _block(tmp_path / README).splitlines() if re.match(r"\| \d+\. \[", line)]
+    rows = [line for line in _block(tmp_path / RESULTS_DOC).splitlines() if re.match(r"\| \d+\. \[", line)]
     assert rows[0].startswith("| 1. [") and "results/libero_object_table2/report.md" in rows[0]
     assert "| 70.0 ± 10.0 (n = 3) | 76.0 (n = 1) | — | — |" in rows[0]  # (80 + 60 + 70) / 3; open loop seed 0
-    assert "libero_object_cpu/report.md" in rows[1]
+    assert "libero_object_cpu/report.md" in rows[1] and rows[1].startswith("| 2. [")
+    readme = _block(tmp_path / README)
+    assert [line[:5] for line in readme.splitlines() if re.match(r"\| \d+\. \[", line)] == ["| 1. "]
+    assert "Row 2 of [docs/results.md]" in readme and "ahead of exact open loop in 0 of 1 rows" in readme
     assert update_docs(tmp_path, check=True) == []
     # The sentence under the table counts the rows whose better BC baseline leads PredVLA: the CPU row's BC-RNN
     # (85.5 against 72.0), then also Table 2's BC-Transformer once its record exists (98.0 against 70.0).
     assert "the better BC baseline is ahead of it in 1 of the 1 rows where one was trained" in _block(
-        tmp_path / README)
+        tmp_path / RESULTS_DOC)
     atomic_write_json(table2 / "runs/records/B1/libero_object/seed0.json", _record("B1", 0, 490))
     configs["B1"] = {"suites": {"libero_object": {"seeds": {"0": 98.0}}}}
     atomic_write_json(table2 / "report.json", {"configs": configs, "pooled": {
@@ -132,6 +140,8 @@ def test_a_new_experiment_leads_the_headline_once_its_report_exists(tmp_path):
     update_docs(tmp_path)
     assert "| 70.0 ± 10.0 (n = 3) | 76.0 (n = 1) | — | 98.0 (n = 1) |" in _block(tmp_path / README)
     assert "the better BC baseline is ahead of it in 2 of the 2 rows where one was trained" in _block(
+        tmp_path / RESULTS_DOC)
+    assert "the better BC baseline is ahead of it in 1 of the 1 rows where one was trained" in _block(
         tmp_path / README)
 
 
@@ -226,7 +236,8 @@ def test_the_four_suites_join_the_headline_beside_the_papers_table_3_once_their_
     update_docs(tmp_path)
     assert "All four suites" not in _block(tmp_path / README)  # no four-suite report yet: libero_object alone
     # libero_object's rows keep a front end of their own, and say so.
-    assert "| PCA bases fitted on libero_object's demonstrations only | all |" in _block(tmp_path / README)
+    assert ("| PCA bases fitted on libero_object's demonstrations only | the paper: fitted jointly on the four "
+            "suites' training demonstrations | all |") in _block(tmp_path / RESULTS_DOC)
 
     def cell(*rates: float) -> dict:
         return {"mean": sum(rates) / len(rates), "std": None if len(rates) == 1 else 5.0, "n": len(rates),
@@ -275,7 +286,9 @@ def test_check_fails_and_names_the_file_when_a_number_is_edited(tmp_path, capsys
     shutil.copy(REPO / README, tmp_path / README)
     shutil.copy(REPO / RESULTS_DOC, tmp_path / RESULTS_DOC)
     readme = tmp_path / README
-    readme.write_text(readme.read_text().replace("72.0 (n = 1)", "78.0 (n = 1)", 1))
+    text = readme.read_text()
+    assert "| 87.8 (n = 1) |" in text  # row 1's exact open loop
+    readme.write_text(text.replace("| 87.8 (n = 1) |", "| 88.8 (n = 1) |", 1))
     assert predvla_main(["report", "--docs", "--check", "--root", str(tmp_path)]) == 1
     assert "README.md: differs" in capsys.readouterr().err
 

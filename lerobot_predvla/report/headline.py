@@ -12,16 +12,17 @@ experiment leads the table once its `report.json` is committed. A reference row,
 (`predvla blind-replay`), comes from `results/blind_replay/report.json` when it exists; on the detailed page its
 per-suite success is set beside the paper's exact open loop, and per task beside the leading row's exact open loop.
 
-`predvla report --docs` rewrites the block between HEADLINE_START and HEADLINE_END in README.md (the summary table
-and the departures) and docs/results.md (the same with what each departure departs from, the blind replay per suite
-and task, and a per-seed table), and the configs and model card of every shipped
-checkpoint (`lerobot_predvla.hub.upload.shipped_checkpoints`: `checkpoints/<name>/` and the models sweeps publish) as
-every publishing route writes them (`lerobot_predvla.hub.upload.repository_files`); `--check` fails when any differs.
+`predvla report --docs` rewrites the block between HEADLINE_START and HEADLINE_END in README.md (the summary table of
+the `front_page` rows, numbered from 1, and their departures) and docs/results.md (every row, with what each
+departure departs from, the blind replay per suite and task, and a per-seed table), and the configs and model card
+of every shipped checkpoint (`lerobot_predvla.hub.upload.shipped_checkpoints`: `checkpoints/<name>/` and the models
+sweeps publish) as every publishing route writes them (`lerobot_predvla.hub.upload.repository_files`); `--check`
+fails when any differs.
 Both blocks end with the four-suite table of `headline_suites` once the four-suite sweep's report exists.
 """
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from lerobot_predvla.columns import SUITES
@@ -68,7 +69,9 @@ class Experiment:
     `data` and `datasets` of its sweep file, checked), when this row's sweep trains no baseline of its own.
     `blind_replay`: a `predvla blind-replay` report (a folder under results/) of this row's demonstrations' plan on
     the official init states its evaluations start from (their tasks and states, checked), shown in the row's label:
-    what replaying one of its own demonstrations without looking gets on the same starts."""
+    what replaying one of its own demonstrations without looking gets on the same starts.
+    `front_page`: False keeps the row to docs/results.md; the README's table leaves it out, numbers its own rows and
+    says under the table how many it left out and where they are."""
 
     results: str
     sweep: str
@@ -79,6 +82,7 @@ class Experiment:
     bc_transformer: str | None = None
     baselines_from: "Experiment | None" = None
     blind_replay: str | None = None
+    front_page: bool = True
 
 
 TABLE2 = Experiment("libero_object_table2", "configs/sweeps/libero_object_table2.yaml", "Table 2",
@@ -87,17 +91,18 @@ EXPERIMENTS = (
     Experiment("libero_object_reading", "configs/sweeps/libero_object_reading_full.yaml", "fit_sensory_olt",
                "predvla_reading", "predvla_reading_open_loop", baselines_from=TABLE2),
     TABLE2,
+    # The short CPU recipes (8,000 steps at batch 8, 20 demonstrations per task): docs/results.md only.
     Experiment("libero_object_cpu", "configs/sweeps/libero_object_cpu.yaml", "CPU recipe",
-               "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1"),
+               "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1", front_page=False),
     Experiment("libero_object_cpu_init_noise", "configs/sweeps/libero_object_cpu_init_noise.yaml", "CPU recipe",
-               "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1"),
+               "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1", front_page=False),
     Experiment("libero_object_cpu_init_noise_wrist", "configs/sweeps/libero_object_cpu_init_noise_wrist.yaml",
-               "CPU recipe", "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1"),
+               "CPU recipe", "predvla_cpu_8k", "predvla_cpu_8k_open_loop", "B2", "B1", front_page=False),
     Experiment("libero_object_cpu_init_noise_wrist", "configs/sweeps/libero_object_cpu_init_noise_wrist.yaml",
                "CPU recipe, lambda_q = 100", "predvla_cpu_8k_lambda_q100_er_lambda_q1_full",
-               "predvla_cpu_8k_lambda_q100_open_loop", "B2", "B1"),
+               "predvla_cpu_8k_lambda_q100_open_loop", "B2", "B1", front_page=False),
     Experiment("libero_object_cpu_hold", "configs/sweeps/libero_object_cpu_hold.yaml", "CPU recipe, lambda_q = 100",
-               "predvla_cpu_lambda_q100", "predvla_cpu_lambda_q100_open_loop"),
+               "predvla_cpu_lambda_q100", "predvla_cpu_lambda_q100_open_loop", front_page=False),
     # The teleoperator model's demonstrations with placements varied by 3 cm (docs/research/demonstrations.md, D3),
     # then without the placements (D2), screening scale: both PredVLA recipes and the BC baselines trained on them,
     # official init states 0-9 of three tasks (a row once its PredVLA has an error-regression cell).
@@ -481,9 +486,12 @@ def plain_sentence(rows: list[Row]) -> str:
 
 
 def row_numbers(numbers: list[int], rows: int) -> str:
-    """`all` of `rows` rows, or the numbers, three or more in a row as a range: `1, 5`, `2-6`."""
-    if len(numbers) == rows:
-        return "all"
+    """`all` of `rows` rows, or the numbers as `number_ranges` writes them."""
+    return "all" if len(numbers) == rows else number_ranges(numbers)
+
+
+def number_ranges(numbers: list[int]) -> str:
+    """Ascending numbers, three or more in a row as a range: `1, 5`, `2-6`."""
     runs: list[list[int]] = []
     for number in numbers:
         if runs and number == runs[-1][-1] + 1:
@@ -524,9 +532,28 @@ def seed_table(rows: list[Row]) -> str:
     return table(["row", "column", "configuration", "training seed", "successes", "protocol"], body)
 
 
-def render(rows: list[Row], prefix: str, detailed: bool, blind: dict | None = None, root: Path | None = None) -> str:
-    parts = [HEADLINE_START, "", summary_table(rows, prefix, blind), "", plain_sentence(rows),
-             *departures_table(rows, prefix, detailed)]
+def front_page_rows(rows: list[Row]) -> tuple[list[Row], list[Row]]:
+    """The README's rows, numbered from 1 in their order, and the rows it leaves to docs/results.md."""
+    shown = [replace(row, number=i) for i, row in enumerate((r for r in rows if r.experiment.front_page), 1)]
+    return shown, [row for row in rows if not row.experiment.front_page]
+
+
+def left_out_sentence(left_out: list[Row], prefix: str) -> list[str]:
+    """Under the README's table: which rows of docs/results.md only that page shows, and their recipes."""
+    if not left_out:
+        return []
+    recipes = ", ".join(dict.fromkeys(row.experiment.recipe for row in left_out))
+    rows = "Row" if len(left_out) == 1 else "Rows"
+    return [f"{rows} {number_ranges([row.number for row in left_out])} of "
+            f"[docs/results.md]({prefix}docs/results.md#libero-libero_object-against-the-paper) ({recipes}): on that "
+            "page only.", ""]
+
+
+def render(rows: list[Row], prefix: str, detailed: bool, blind: dict | None = None, root: Path | None = None,
+           left_out: list[Row] = ()) -> str:
+    """One headline block of `rows`; `left_out`: the rows of docs/results.md that these leave out (README)."""
+    parts = [HEADLINE_START, "", summary_table(rows, prefix, blind), "", *left_out_sentence(list(left_out), prefix),
+             *([plain_sentence(rows), *departures_table(rows, prefix, detailed)] if rows else [])]
     suites = four_suite_table(root, prefix, blind) if root is not None else None
     if suites:
         parts += ["", suites]
@@ -568,12 +595,15 @@ def update_docs(root: Path, check: bool = False) -> list[Path]:
     rows = build_rows(root)
     blind = load_blind_replay(Path(root) / blind_replay.DEFAULT_OUT)
     new = {}
+    front_page, left_out = front_page_rows(rows)
     for name, prefix, detailed in ((README, "", False), (RESULTS_DOC, "../", True)):
         path = Path(root) / name
         if not path.is_file():
             raise ReportError(f"{path}: not found.")
         text = path.read_text()
-        updated = replace_block(text, render(rows, prefix, detailed, blind, root), path)
+        block = (render(rows, prefix, detailed, blind, root) if detailed else
+                 render(front_page, prefix, detailed, blind, root, left_out))
+        updated = replace_block(text, block, path)
         if updated != text:
             new[path] = updated.encode()
     new.update(stale_checkpoint_files(root))
