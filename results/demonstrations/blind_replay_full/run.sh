@@ -1,0 +1,21 @@
+#!/bin/bash
+# The blind-replay figure of each full-scale evaluation set (docs/research/demonstrations.md, "Full scale: the
+# blind-replay figures"): the screen's commands on all ten tasks and 20 episodes per task and set, target sets first
+# (E3, then D3's E2p, then E1 and E2), the teleop plan before the scripted one in each. Physics only, one core;
+# every set resumes task by task. Run from the repository root (or a worktree) after `make libero`; a set is not
+# started after STOP_AT (HHMM, UTC), if given.
+set -u
+o=results/demonstrations/blind_replay_full
+export MUJOCO_GL=egl OMP_NUM_THREADS=1 OPENBLAS_CORETYPE=SkylakeX
+replay() {  # replay SET STYLE [flags]
+  local set=$1 style=$2; shift 2
+  if [ -n "${STOP_AT:-}" ] && [ "$(date -u +%H%M)" -ge "$STOP_AT" ]; then echo "$(date -u) stop: ${set}_$style"; exit 0; fi
+  local b=(predvla blind-replay --suites libero_object --tasks 0-9 --style "$style")
+  [ "$style" = teleop ] && b+=(--diversity 1)
+  echo "$(date -u) start ${set}_$style"
+  "${b[@]}" "$@" --out "$o/${set}_$style" || exit 1
+}
+for style in teleop scripted; do replay E3 $style --states 0-19 --object-shift-cm 4 --object-shift-pattern cross; done
+replay E2p teleop --resets-seed 3000 --episodes 20 --placement-spread-cm 3
+for style in teleop scripted; do replay E1 $style --states 1-19; done
+for style in teleop scripted; do replay E2 $style --resets-seed 3000 --episodes 20; done
