@@ -14,6 +14,14 @@ Command (from the repository root):
       --blind results/demonstrations/blind_replay --style teleop --out results/demonstrations/teleop_placed/sets
 
 Writes OUT/sets.json, OUT/sets.md (successes/episodes per cell; a cell not run is "not run") and OUT/sets.png.
+
+At full scale (all ten tasks), `--apart 2,3,6` also splits every cell and blind-replay figure into the listed tasks
+(the screen's, whose episodes the screen already saw) and the others (sets.json's `apart`, a second table in sets.md),
+from the records' per-task counts and the blind replays' per-task files:
+
+  python -m research.demonstration_sets --runs results/demonstrations/teleop_full/runs \
+      --blind results/demonstrations/blind_replay_full --style teleop --apart 2,3,6 \
+      --out results/demonstrations/teleop_full/sets
 """
 
 import argparse
@@ -22,6 +30,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from lerobot_predvla.cli.demos import task_ids
 from lerobot_predvla.report.formatting import fmt_rate, table
 from lerobot_predvla.report.headline import load_blind_replay
 from lerobot_predvla.report.results import ReportError
@@ -30,7 +39,7 @@ from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atom
 
 SUITE = "libero_object"
 # (name, cell-name suffix, what the starts are)
-SETS = (("E1", "", "official init states 0-9"),
+SETS = (("E1", "", "official init states"),
         ("E2", "_resets", "randomised resets of seed 3000"),
         ("E2p", "_placed_resets", "the resets, objects moved as in D3 (3 cm std)"),
         ("E3", "_shifted", "official init states, object to pick moved 4 cm"))
@@ -50,19 +59,48 @@ COMMAND = "python -m research.demonstration_sets"
 
 def cell(runs: Path, config: str, seed: int = 0) -> tuple[int, int] | None:
     """(successes, episodes) of a cell's run record, None when it has none."""
+    record = _record(runs, config, seed)
+    return None if record is None else (int(record["successes"]), int(record["episodes"]))
+
+
+def cell_apart(runs: Path, config: str, listed: list[int], seed: int = 0) -> dict[str, tuple[int, int]] | None:
+    """{"listed": (successes, episodes), "others": ...} of a cell's run record over its tasks in `listed` and the
+    rest, None when it has none."""
+    record = _record(runs, config, seed)
+    if record is None:
+        return None
+    path = runs / "records" / config / SUITE / f"seed{seed}.json"
+    try:
+        tasks = {int(t): (int(c["successes"]), int(c["episodes"])) for t, c in record["tasks"].items()}
+    except (ValueError, KeyError, TypeError, AttributeError) as err:
+        raise ValueError(f"{path}: no per-task counts ({err}).") from err
+    return _split(tasks, listed)
+
+
+def _record(runs: Path, config: str, seed: int) -> dict | None:
     path = runs / "records" / config / SUITE / f"seed{seed}.json"
     if not path.is_file():
         return None
     try:
         record = json.loads(path.read_text())
-        return int(record["successes"]), int(record["episodes"])
+        int(record["successes"]), int(record["episodes"])
     except (ValueError, KeyError, TypeError) as err:
         raise ValueError(f"{path}: not a run record ({err}).") from err
+    return record
 
 
-def blind_figure(blind: Path, set_name: str, style: str) -> tuple[int, int] | None:
-    """(successes, episodes) of the dataset's plan from state 0 replayed blind on the set, None when not run (the
-    report read and checked as the headline reads its blind replays)."""
+def _split(tasks: dict[int, tuple[int, int]], listed: list[int]) -> dict[str, tuple[int, int]]:
+    """Per-task (successes, episodes) summed over the `listed` tasks and over the others."""
+    def total(chosen: list[tuple[int, int]]) -> tuple[int, int]:
+        return sum(s for s, _ in chosen), sum(e for _, e in chosen)
+
+    return {"listed": total([v for t, v in tasks.items() if t in listed]),
+            "others": total([v for t, v in tasks.items() if t not in listed])}
+
+
+def blind_tasks(blind: Path, set_name: str, style: str) -> dict[str, dict] | None:
+    """Per task, the blind-replay report's entry of the dataset's plan from state 0 replayed blind on the set, None
+    when not run (the report read and checked as the headline reads its blind replays)."""
     folder = blind / f"{set_name}_{style}"
     try:
         report = load_blind_replay(folder)
@@ -72,31 +110,66 @@ def blind_figure(blind: Path, set_name: str, style: str) -> tuple[int, int] | No
         return None
     if SUITE not in report:
         raise ValueError(f"{folder / blind_replay.REPORT_JSON}: no {SUITE} blind replay.")
-    tasks = report[SUITE]
+    return report[SUITE]
+
+
+def blind_total(tasks: dict[str, dict], set_name: str) -> tuple[int, int]:
+    """(successes, episodes) of the tasks' plans: on E1 with each plan's replay on its own start (state 0)."""
     return blind_replay.totals_with_source(tasks) if set_name == "E1" else blind_replay.totals(tasks)
 
 
-def collect(runs: Path, blind: Path, style: str) -> dict:
-    """sets.json's content: per policy label and set name, [successes, episodes] or None."""
+def blind_figure(blind: Path, set_name: str, style: str) -> tuple[int, int] | None:
+    """(successes, episodes) of the dataset's plan from state 0 replayed blind on the set, None when not run."""
+    tasks = blind_tasks(blind, set_name, style)
+    return None if tasks is None else blind_total(tasks, set_name)
+
+
+def blind_apart(blind: Path, set_name: str, style: str, listed: list[int]) -> dict[str, tuple[int, int]] | None:
+    """`blind_figure` over the `listed` tasks and over the others."""
+    tasks = blind_tasks(blind, set_name, style)
+    if tasks is None:
+        return None
+    return {group: blind_total({t: v for t, v in tasks.items() if (int(t) in listed) == (group == "listed")},
+                               set_name) for group in ("listed", "others")}
+
+
+def collect(runs: Path, blind: Path, style: str, apart: list[int] | None = None) -> dict:
+    """sets.json's content: per policy label and set name, [successes, episodes] or None; with `apart`, the same
+    per group of tasks (`listed`, `others`) under `apart`."""
     if not (runs / "records").is_dir():
         raise ValueError(f"--runs {runs}: no records/ folder (a `predvla sweep --runs-dir`).")
     cells = {label: {name: cell(runs, prefix + suffix) for name, suffix, _ in SETS} for prefix, label in POLICIES}
-    return {"style": style, "sets": {name: what for name, _, what in SETS}, "cells": cells,
-            "blind_replay": {name: blind_figure(blind, name, style) for name, _, _ in SETS}}
+    report = {"style": style, "sets": {name: what for name, _, what in SETS}, "cells": cells,
+              "blind_replay": {name: blind_figure(blind, name, style) for name, _, _ in SETS}}
+    if apart:
+        report["apart"] = {
+            "tasks": sorted(apart),
+            "cells": {label: {name: cell_apart(runs, prefix + suffix, apart) for name, suffix, _ in SETS}
+                      for prefix, label in POLICIES},
+            "blind_replay": {name: blind_apart(blind, name, style, apart) for name, _, _ in SETS}}
+    return report
 
 
 def markdown(report: dict, command: str) -> str:
     def text(value) -> str:
         return fmt_rate(*value) if value else NOT_RUN
 
+    def split(value) -> str:
+        return f"{text(value['listed'])} / {text(value['others'])}" if value else NOT_RUN
+
     header = ["policy", *[f"{name}: {what}" for name, what in report["sets"].items()]]
+    reference = f"reference: one {report['style']} demonstration replayed blind (plan from official init state 0)"
     body = [[label, *[text(v) for v in sets.values()]] for label, sets in report["cells"].items()]
-    body.append([f"reference: one {report['style']} demonstration replayed blind (plan from official init state 0)",
-                 *[text(v) for v in report["blind_replay"].values()]])
-    return "\n".join(["# Success per evaluation set", "",
-                      "Success in % (successes/episodes) of every cell of the screen, per evaluation set, with one "
-                      "of the dataset's demonstrations replayed blind on the same starts.", "",
-                      table(header, body), "", "Reproduce:", "", "```bash", command, "```", ""])
+    body.append([reference, *[text(v) for v in report["blind_replay"].values()]])
+    lines = ["# Success per evaluation set", "",
+             "Success in % (successes/episodes) of every cell, per evaluation set, with one of the dataset's "
+             "demonstrations replayed blind on the same starts.", "", table(header, body), ""]
+    if apart := report.get("apart"):
+        listed = ", ".join(map(str, apart["tasks"]))
+        body = [[label, *[split(v) for v in sets.values()]] for label, sets in apart["cells"].items()]
+        body.append([reference, *[split(v) for v in apart["blind_replay"].values()]])
+        lines += [f"The same cells on tasks {listed} / on the other tasks:", "", table(header, body), ""]
+    return "\n".join([*lines, "Reproduce:", "", "```bash", command, "```", ""])
 
 
 def figure(report: dict, path: Path) -> None:
@@ -143,6 +216,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--runs", type=Path, required=True, help="the sweep's --runs-dir")
     parser.add_argument("--blind", type=Path, required=True, help="folder of the <set>_<style> blind replays")
     parser.add_argument("--style", choices=("scripted", "teleop"), required=True, help="the dataset's style")
+    parser.add_argument("--apart", type=task_ids, default=None,
+                        help="task ids, e.g. 2,3,6: also every figure on these tasks and on the others")
     parser.add_argument("--out", type=Path, required=True)
     return parser
 
@@ -151,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser().parse_args(argv)
     try:
-        report = collect(args.runs, args.blind, args.style)
+        report = collect(args.runs, args.blind, args.style, args.apart)
     except ValueError as err:
         print(f"{COMMAND}: error: {err}", file=sys.stderr)
         return 2

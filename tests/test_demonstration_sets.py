@@ -54,3 +54,37 @@ def test_a_broken_record_is_named(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
     assert ds.main([*args[:1], str(tmp_path / "none"), *args[2:]]) == 2
     assert "no records/ folder" in capsys.readouterr().err
+
+
+def test_apart_splits_every_cell_and_blind_figure_into_the_listed_tasks_and_the_others(tmp_path, capsys):
+    """Full scale: the screen's tasks (listed) apart from the unscreened ones, from the per-task counts."""
+    runs, blind, out = tmp_path / "runs", tmp_path / "blind", tmp_path / "out"
+    per_task = {"0": 20, "2": 5, "3": 1, "9": 12}  # successes of 20 episodes per task
+    write_record(runs, "olt_open_loop_shifted", sum(per_task.values()), 80)
+    record = runs / "records" / "olt_open_loop_shifted" / "libero_object" / "seed0.json"
+    record.write_text(json.dumps({**json.loads(record.read_text()),
+                                  "tasks": {t: {"successes": s, "episodes": 20} for t, s in per_task.items()}}))
+    write_blind(blind, "E3_teleop", {t: {"successes": s, "episodes": 20, "source_replay_success": False}
+                                     for t, s in {"0": 3, "2": 1, "3": 0, "9": 6}.items()})
+    write_blind(blind, "E1_teleop", {t: {"successes": 19, "episodes": 19, "source_replay_success": t != "3"}
+                                     for t in ("0", "2", "3", "9")})
+    args = ["--runs", str(runs), "--blind", str(blind), "--style", "teleop", "--out", str(out)]
+    assert ds.main([*args, "--apart", "2,3"]) == 0
+    report = json.loads((out / "sets.json").read_text())
+    apart = report["apart"]
+    assert apart["tasks"] == [2, 3]
+    assert apart["cells"]["PredVLA fit_sensory_olt, exact open loop"]["E3"] == {"listed": [6, 40],
+                                                                                "others": [32, 40]}
+    assert apart["cells"]["PredVLA fit_sensory_olt, exact open loop"]["E1"] is None
+    assert report["cells"]["PredVLA fit_sensory_olt, exact open loop"]["E3"] == [38, 80]
+    assert apart["blind_replay"]["E3"] == {"listed": [1, 40], "others": [9, 40]}
+    assert apart["blind_replay"]["E1"] == {"listed": [39, 40], "others": [40, 40]}  # own start: not on task 3
+    md = (out / "sets.md").read_text()
+    assert "The same cells on tasks 2, 3 / on the other tasks:" in md
+    assert "| 15.0 (6/40) / 80.0 (32/40) |" in md
+    # A record without per-task counts cannot be split, and says so.
+    write_record(runs, "B1_shifted", 3)
+    capsys.readouterr()
+    assert ds.main([*args, "--apart", "2,3"]) == 2
+    assert "B1_shifted/libero_object/seed0.json: no per-task counts" in capsys.readouterr().err
+    assert ds.main(args) == 0 and "apart" not in json.loads((out / "sets.json").read_text())
