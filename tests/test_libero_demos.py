@@ -369,3 +369,11 @@ def test_demo_start_spread_reads_the_demonstrations_first_states(libero, tmp_pat
     assert spread["demonstrations"] == spread["official"]
     assert spread["official"]["starts"] == 50 and spread["official"]["joint_std"] > 0.005
     assert main(["--suite", SUITE, "--demos", str(tmp_path / "elsewhere")]) == 2
+
+
+def test_demos_refuses_a_task_the_suite_does_not_have_before_recording_any(libero, tmp_path):
+    from lerobot_predvla.cli.main import main
+
+    with pytest.raises(SystemExit, match=r"--tasks \[10\]: libero_object has tasks 0-9"):
+        main(["demos", "--suite", SUITE, "--tasks", "0,10", "--per-task", "1", "--out", str(tmp_path)])
+    assert not any(tmp_path.iterdir())

@@ -52,7 +52,10 @@ def record_demos(args: argparse.Namespace) -> int:
     teleop = TELEOP.at(diversity) if args.style == "teleop" else None
     if args.out is None and not args.no_render:
         raise SystemExit("--out is required (or pass --no-render to only measure expert success)")
-    task_ids = args.tasks if args.tasks is not None else list(range(num_tasks(args.suite)))
+    n_tasks = num_tasks(args.suite)
+    task_ids = args.tasks if args.tasks is not None else list(range(n_tasks))
+    if outside := [t for t in task_ids if not 0 <= t < n_tasks]:
+        raise SystemExit(f"--tasks {outside}: {args.suite} has tasks 0-{n_tasks - 1}")
     max_attempts = args.max_attempts or 3 * args.per_task
     max_steps = args.max_steps or STEP_CAPS[args.suite]
     report = []
