@@ -502,22 +502,30 @@ def number_ranges(numbers: list[int]) -> str:
 
 
 def departures_table(rows: list[Row], prefix: str, detailed: bool) -> list[str]:
-    """Every departure from the paper once, by topic, with the rows it applies to; `detailed` adds what it departs
-    from (the README links there)."""
+    """Every departure from the paper once, by topic, with the rows it applies to: `detailed`, one line each with
+    what it departs from; otherwise (the README, which links there) one line per topic."""
     applies: dict[tuple[str, Departure], list[int]] = {}
     for row in rows:
         for item in row.departures:
             applies.setdefault(item, []).append(row.number)
-    body, shown = [], None
-    for (topic, departure), numbers in sorted(applies.items(), key=lambda item: TOPICS.index(item[0][0])):
-        body.append([topic if topic != shown else "", departure.label,
-                     *([departure.reference] if detailed else []), row_numbers(numbers, len(rows))])
-        shown = topic
+    ordered = sorted(applies.items(), key=lambda item: TOPICS.index(item[0][0]))
     starts = f"[official init states]({prefix}docs/glossary.md#official-init-states)"
-    against = ", against what each departs from:" if detailed else (
-        f"; what each departs from: [docs/results.md]({prefix}docs/results.md#libero-libero_object-against-the-paper).")
-    return [f"How the rows depart from the paper (each evaluated from the {starts} unless listed here){against}", "",
-            table(["", "departure", *(["against"] if detailed else []), "rows"], body)]
+    if detailed:
+        body, shown = [], None
+        for (topic, departure), numbers in ordered:
+            body.append([topic if topic != shown else "", departure.label, departure.reference,
+                         row_numbers(numbers, len(rows))])
+            shown = topic
+        return [f"How the rows depart from the paper (each evaluated from the {starts} unless listed here), against "
+                "what each departs from:", "", table(["", "departure", "against", "rows"], body)]
+    topics: dict[str, list[str]] = {}
+    for (topic, departure), numbers in ordered:
+        which = row_numbers(numbers, len(rows))
+        which = "all rows" if which == "all" else f"row{'s' if len(numbers) > 1 else ''} {which}"
+        topics.setdefault(topic, []).append(f"{departure.label} ({which})")
+    return [f"How the rows depart from the paper (each evaluated from the {starts} unless listed here); what each "
+            f"departs from: [docs/results.md]({prefix}docs/results.md#libero-libero_object-against-the-paper).", "",
+            table(["", "departures"], [[topic, "; ".join(items)] for topic, items in topics.items()])]
 
 
 def seed_table(rows: list[Row]) -> str:
