@@ -13,13 +13,13 @@ import pytest
 from lerobot_predvla.cli.main import build_parser
 from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.hub.upload import shipped_checkpoints, without_machine_paths
+from lerobot_predvla.report.formatting import row_numbers
 from lerobot_predvla.report.headline import (
     EXPERIMENTS,
     HEADLINE_END,
     HEADLINE_START,
     README,
     RESULTS_DOC,
-    row_numbers,
     update_docs,
 )
 from lerobot_predvla.report.results import ReportError
@@ -434,7 +434,7 @@ def test_shipped_checkpoints_include_the_models_sweeps_publish():
 
 @pytest.mark.parametrize("where", ["shipped", "sweep/predvla_seed0"])  # checkpoints/<name>/, a sweep's train.publish
 def test_report_docs_rewrites_a_checkpoint_that_pins_the_device_and_keeps_its_manifest(tmp_path, where):
-    from lerobot_predvla.report.headline import stale_checkpoint_files
+    from lerobot_predvla.hub.upload import stale_checkpoint_files
     from lerobot_predvla.utils.io import atomic_write_bytes
     from lerobot_predvla.utils.manifest import verify_manifests, write_manifest
 
@@ -537,7 +537,7 @@ def test_bracket_arguments_are_quoted():
 
 # ----- model cards and configs of the shipped checkpoints -------------------------------------------------
 def test_shipped_configs_and_model_cards_are_as_published():
-    from lerobot_predvla.report.headline import stale_checkpoint_files
+    from lerobot_predvla.hub.upload import stale_checkpoint_files
 
     assert stale_checkpoint_files(REPO) == {}, "run `predvla report --docs` and commit checkpoints/"
 

@@ -53,7 +53,9 @@ def figures(text: str) -> list[tuple[str, tuple[float, int]]]:
             for column, cell in zip(rows[0][1:], row[1:], strict=False):
                 value = re.match(NUMBER, cell)
                 if value:
-                    found.append((f"headline: {LINK.sub(r'\1', row[0])} / {column}", parse(value.group(1))))
+                    # The row's label without its number: the README numbers its own rows (a selection).
+                    label = re.sub(r"^\d+\. ", "", LINK.sub(r"\1", row[0]))
+                    found.append((f"headline: {label} / {column}", parse(value.group(1))))
     return found
 
 
@@ -100,13 +102,13 @@ def test_a_figure_two_pages_give_differently_is_found():
     assert found["er_fast_over_floor_b1"]["docs/results.md"] == [1.4]
     assert found["er_fast_over_floor_b1"]["README.md"] == [1.25]
 
-    cell = "| 72.0 (n = 1) | 74.0 (n = 1) |"
+    cell = "| 77.4 (n = 1) | 87.8 (n = 1) |"
     assert cell in pages["README.md"]
-    injected = {**pages, "README.md": pages["README.md"].replace(cell, "| 70.0 (n = 1) | 74.0 (n = 1) |")}
+    injected = {**pages, "README.md": pages["README.md"].replace(cell, "| 70.0 (n = 1) | 87.8 (n = 1) |")}
     found = disagreements(injected)
     assert len(found) == 1
     key, values = found.popitem()
-    # the row's number moves as rows are added above it; its label and column do not
-    assert key.startswith("headline: ")
-    assert key.endswith(". CPU recipe; 20 scripted demonstrations per task (report) / PredVLA, error regression")
-    assert values == {"README.md": [70.0], "docs/results.md": [72.0]}
+    # the row's number moves as rows are added above it (and the README numbers its own); its label and column do not
+    assert key.startswith("headline: fit_sensory_olt; 50 scripted demonstrations per task")
+    assert key.endswith(" / PredVLA, error regression")
+    assert values == {"README.md": [70.0], "docs/results.md": [77.4]}

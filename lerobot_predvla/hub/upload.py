@@ -11,6 +11,9 @@ What is published: `config.json`, `model.safetensors`, `train_config.json`, the 
 artefact itself as `predvla_frontend/` when available, `README.md` (the card) and `sha256_manifest.json` (the
 SHA-256 of every file of the commit, verified on loading). Never the training
 posteriors (`posterior_store.safetensors`) nor `training_state/` (optimizer, scheduler, RNG).
+
+The checkpoints committed to this repository (`shipped_checkpoints`) hold the same files: `stale_checkpoint_files`
+lists where they differ, which `predvla report --docs` rewrites and `--check` refuses.
 """
 
 import json
@@ -39,7 +42,7 @@ from lerobot_predvla.hub.card import (
 )
 from lerobot_predvla.policies.predvla.posterior_store import POSTERIOR_STORE_FILE
 from lerobot_predvla.utils.checkpoints import REQUIRED_FILES, find_pretrained
-from lerobot_predvla.utils.manifest import MANIFEST_FILE, manifest_text
+from lerobot_predvla.utils.manifest import MANIFEST_FILE, listed_files, manifest_text
 
 PUSH_PATTERNS = ("*.safetensors", "*.json", "*.yaml", "*.md")  # what LeRobot's own push uploads
 # A saved folder's manifest lists that folder (posterior store included); each publishing route writes the manifest
@@ -271,3 +274,21 @@ def push_policy(
         published[CARD_FILE] = render_card(published, repo_id, dataset).encode()
         published[MANIFEST_FILE] = manifest_text(published).encode()
         return upload_files(published, repo_id, private, "Upload PredVLA policy weights, train config, front end, card")
+
+
+def stale_checkpoint_files(root: Path) -> dict[Path, bytes]:
+    """The files of each shipped checkpoint (`shipped_checkpoints`) that differ from what every publishing route
+    writes (`repository_files`: configs that do not pin the
+    training machine, the model card rendered from the checkpoint's config, training record and evaluations), with
+    their new content; and the checkpoint's SHA-256 manifest where it has one, recomputed over its files with those
+    contents."""
+
+    stale = {}
+    for checkpoint in shipped_checkpoints(root):
+        changed = {rel: data for rel, data in repository_files(checkpoint, root).items()
+                   if not (checkpoint / rel).is_file() or (checkpoint / rel).read_bytes() != data}
+        manifest = checkpoint / MANIFEST_FILE
+        if changed and manifest.is_file():
+            changed[MANIFEST_FILE] = manifest_text({**listed_files(checkpoint), **changed}).encode()
+        stale.update({checkpoint / rel: data for rel, data in changed.items()})
+    return stale

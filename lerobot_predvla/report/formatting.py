@@ -36,3 +36,19 @@ def fmt_params(value: int | None) -> str:
 def fmt_rate(successes: int, episodes: int) -> str:
     """`76.0 (152/200)`: the success rate and its counts."""
     return f"{percent(successes, episodes):.1f} ({successes}/{episodes})" if episodes else MISSING
+
+
+def row_numbers(numbers: list[int], rows: int) -> str:
+    """`all` of `rows` rows, or the numbers as `number_ranges` writes them."""
+    return "all" if len(numbers) == rows else number_ranges(numbers)
+
+
+def number_ranges(numbers: list[int]) -> str:
+    """Ascending numbers, three or more in a row as a range: `1, 5`, `2-6`."""
+    runs: list[list[int]] = []
+    for number in numbers:
+        if runs and number == runs[-1][-1] + 1:
+            runs[-1].append(number)
+        else:
+            runs.append([number])
+    return ", ".join(f"{run[0]}-{run[-1]}" if len(run) > 2 else ", ".join(map(str, run)) for run in runs)
