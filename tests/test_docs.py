@@ -577,6 +577,20 @@ def test_a_published_copy_of_a_resumed_training_carries_its_evaluations():
     assert not configs & {r["config"] for r in evaluation_records(other, REPO / "results")}
 
 
+def test_a_longer_training_of_the_same_job_is_another_model():
+    """D2's full-scale model (30,000 steps) and its screening model (10,000) share the job name, dataset and seed:
+    each card lists only its own evaluations."""
+    from lerobot_predvla.hub.card import evaluation_records
+
+    full, screen = (REPO / f"checkpoints/demonstrations/{name}/olt_seed0" for name in ("teleop_full", "teleop"))
+    assert json.loads((full / "train_config.json").read_text())["job_name"] == json.loads(
+        (screen / "train_config.json").read_text())["job_name"]
+    assert {r["results"] for r in evaluation_records(screen, REPO / "results")} == {"results/demonstrations/teleop"}
+    assert all(r["results"] == "results/demonstrations/teleop_full"
+               for r in evaluation_records(full, REPO / "results"))
+    assert "Trained for 30,000 steps, batch size 16 per process" in (full / "README.md").read_text()
+
+
 def test_model_card_command_reproduces_its_results_and_limitations_state_them():
     """The card's `lerobot-eval` command runs the protocol of the results it shows (episodes per task, step cap), and
     its limitations give error regression against exact open loop and the BC baselines on the same data."""

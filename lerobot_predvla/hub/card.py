@@ -223,8 +223,9 @@ def training_command(checkpoint: Path, results_root: Path) -> list[str] | None:
 
 def evaluation_records(checkpoint: Path, results_root: Path) -> list[dict]:
     """The `predvla sweep` run records under `results_root/*/runs/records/` that evaluated `checkpoint`: those whose
-    `checkpoint` is this directory, those whose training (job name, dataset and seed) is the one its
-    `train_config.json` records (a checkpoint copied out of a sweep's runs directory), and those that evaluated its
+    `checkpoint` is this directory, those whose training (job name, dataset, seed and, where its command names it,
+    step count) is the one its `train_config.json` records (a checkpoint copied out of a sweep's runs directory; a
+    longer training of the same job is another model), and those that evaluated its
     weights (`model_sha256`: a published copy, e.g. `predvla push --out`, of a resumed training)."""
     checkpoint = Path(checkpoint).resolve()
     train_cfg_path = checkpoint / "train_config.json"
@@ -241,7 +242,8 @@ def evaluation_records(checkpoint: Path, results_root: Path) -> list[dict]:
         same_training = bool(train_cfg) and (
             _flag(train, "--job_name") == train_cfg.get("job_name")
             and _flag(train, "--dataset.repo_id") == train_cfg.get("dataset", {}).get("repo_id")
-            and int(record["seed"]) == train_cfg.get("seed"))
+            and int(record["seed"]) == train_cfg.get("seed")
+            and _flag(train, "--steps") in (None, str(train_cfg.get("steps"))))
         same_weights = weights_sha256 is not None and record.get("model_sha256") == weights_sha256
         if same_dir or same_training or same_weights:
             found.append({**record, "results": str(runs_dir.parent.relative_to(Path(results_root).parent))})
