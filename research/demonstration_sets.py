@@ -28,6 +28,8 @@ import argparse
 import json
 import shlex
 import sys
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 from lerobot_predvla.cli.demos import task_ids
@@ -57,45 +59,35 @@ REPORT_JSON, REPORT_MD, FIGURE = "sets.json", "sets.md", "sets.png"
 COMMAND = "python -m research.demonstration_sets"
 
 
-def cell(runs: Path, config: str, seed: int = 0) -> tuple[int, int] | None:
-    """(successes, episodes) of a cell's run record, None when it has none."""
-    record = _record(runs, config, seed)
-    return None if record is None else (int(record["successes"]), int(record["episodes"]))
-
-
-def cell_apart(runs: Path, config: str, listed: list[int], seed: int = 0) -> dict[str, tuple[int, int]] | None:
-    """{"listed": (successes, episodes), "others": ...} of a cell's run record over its tasks in `listed` and the
-    rest, None when it has none."""
-    record = _record(runs, config, seed)
-    if record is None:
-        return None
-    path = runs / "records" / config / SUITE / f"seed{seed}.json"
-    try:
-        tasks = {int(t): (int(c["successes"]), int(c["episodes"])) for t, c in record["tasks"].items()}
-    except (ValueError, KeyError, TypeError, AttributeError) as err:
-        raise ValueError(f"{path}: no per-task counts ({err}).") from err
-    return _split(tasks, listed)
-
-
-def _record(runs: Path, config: str, seed: int) -> dict | None:
+def load_record(runs: Path, config: str, seed: int = 0) -> tuple[Path, dict | None]:
+    """A cell's run record (checked to hold its totals) and its path; None when the cell has none."""
     path = runs / "records" / config / SUITE / f"seed{seed}.json"
     if not path.is_file():
-        return None
+        return path, None
     try:
         record = json.loads(path.read_text())
         int(record["successes"]), int(record["episodes"])
     except (ValueError, KeyError, TypeError) as err:
         raise ValueError(f"{path}: not a run record ({err}).") from err
-    return record
+    return path, record
 
 
-def _split(tasks: dict[int, tuple[int, int]], listed: list[int]) -> dict[str, tuple[int, int]]:
-    """Per-task (successes, episodes) summed over the `listed` tasks and over the others."""
-    def total(chosen: list[tuple[int, int]]) -> tuple[int, int]:
-        return sum(s for s, _ in chosen), sum(e for _, e in chosen)
+def per_task(path: Path, record: dict) -> dict[int, tuple[int, int]]:
+    """Task id -> (successes, episodes) of a run record."""
+    try:
+        return {int(t): (int(c["successes"]), int(c["episodes"])) for t, c in record["tasks"].items()}
+    except (ValueError, KeyError, TypeError, AttributeError) as err:
+        raise ValueError(f"{path}: no per-task counts ({err}).") from err
 
-    return {"listed": total([v for t, v in tasks.items() if t in listed]),
-            "others": total([v for t, v in tasks.items() if t not in listed])}
+
+def split(tasks: dict, listed: list[int], total: Callable[[dict], tuple[int, int]]) -> dict[str, tuple[int, int]]:
+    """`total` of the entries of `tasks` (keyed by task id, int or str) in `listed`, and of the others."""
+    return {group: total({t: v for t, v in tasks.items() if (int(t) in listed) == (group == "listed")})
+            for group in ("listed", "others")}
+
+
+def counts_total(tasks: dict[int, tuple[int, int]]) -> tuple[int, int]:
+    return sum(s for s, _ in tasks.values()), sum(e for _, e in tasks.values())
 
 
 def blind_tasks(blind: Path, set_name: str, style: str) -> dict[str, dict] | None:
@@ -118,35 +110,31 @@ def blind_total(tasks: dict[str, dict], set_name: str) -> tuple[int, int]:
     return blind_replay.totals_with_source(tasks) if set_name == "E1" else blind_replay.totals(tasks)
 
 
-def blind_figure(blind: Path, set_name: str, style: str) -> tuple[int, int] | None:
-    """(successes, episodes) of the dataset's plan from state 0 replayed blind on the set, None when not run."""
-    tasks = blind_tasks(blind, set_name, style)
-    return None if tasks is None else blind_total(tasks, set_name)
-
-
-def blind_apart(blind: Path, set_name: str, style: str, listed: list[int]) -> dict[str, tuple[int, int]] | None:
-    """`blind_figure` over the `listed` tasks and over the others."""
-    tasks = blind_tasks(blind, set_name, style)
-    if tasks is None:
-        return None
-    return {group: blind_total({t: v for t, v in tasks.items() if (int(t) in listed) == (group == "listed")},
-                               set_name) for group in ("listed", "others")}
-
-
 def collect(runs: Path, blind: Path, style: str, apart: list[int] | None = None) -> dict:
     """sets.json's content: per policy label and set name, [successes, episodes] or None; with `apart`, the same
-    per group of tasks (`listed`, `others`) under `apart`."""
+    per group of tasks (`listed`, `others`) under `apart`. Each record and blind replay is read once."""
     if not (runs / "records").is_dir():
         raise ValueError(f"--runs {runs}: no records/ folder (a `predvla sweep --runs-dir`).")
-    cells = {label: {name: cell(runs, prefix + suffix) for name, suffix, _ in SETS} for prefix, label in POLICIES}
+    cells: dict[str, dict] = {}
+    cells_apart: dict[str, dict] = {}
+    for prefix, label in POLICIES:
+        cells[label], cells_apart[label] = {}, {}
+        for name, suffix, _ in SETS:
+            path, record = load_record(runs, prefix + suffix)
+            cells[label][name] = None if record is None else (int(record["successes"]), int(record["episodes"]))
+            if apart:
+                cells_apart[label][name] = None if record is None else split(per_task(path, record), apart,
+                                                                             counts_total)
+    figures, figures_apart = {}, {}
+    for name, _, _ in SETS:
+        tasks = blind_tasks(blind, name, style)
+        figures[name] = None if tasks is None else blind_total(tasks, name)
+        if apart:
+            figures_apart[name] = None if tasks is None else split(tasks, apart, partial(blind_total, set_name=name))
     report = {"style": style, "sets": {name: what for name, _, what in SETS}, "cells": cells,
-              "blind_replay": {name: blind_figure(blind, name, style) for name, _, _ in SETS}}
+              "blind_replay": figures}
     if apart:
-        report["apart"] = {
-            "tasks": sorted(apart),
-            "cells": {label: {name: cell_apart(runs, prefix + suffix, apart) for name, suffix, _ in SETS}
-                      for prefix, label in POLICIES},
-            "blind_replay": {name: blind_apart(blind, name, style, apart) for name, _, _ in SETS}}
+        report["apart"] = {"tasks": sorted(apart), "cells": cells_apart, "blind_replay": figures_apart}
     return report
 
 
