@@ -96,7 +96,8 @@ def test_a_further_environment_costs_a_fraction_of_robosuites_renderer(tmp_path)
 
     With a robosuite renderer per environment each one added ~0.75 GB; without, about 0.3 GB, of which its MuJoCo
     model is 0.25 GB (docs/speed.md, "Evaluation memory"). Fresh processes: in the test runner's own process what
-    earlier tests left in the allocator moves resident memory by hundreds of MB either way."""
+    earlier tests left in the allocator moves resident memory by hundreds of MB either way. The bound sits halfway
+    between the two costs: on a machine whose memory other processes hold it measured 0.43 GB, idle 0.3."""
     import sys
 
     from benchmarks.bench_eval_memory import peak_rss_gb
@@ -106,7 +107,7 @@ def test_a_further_environment_costs_a_fraction_of_robosuites_renderer(tmp_path)
         command = [sys.executable, "-m", "benchmarks.bench_eval_memory", "--environments-only", str(n_envs),
                    "--steps", "5"]
         peak[n_envs] = peak_rss_gb(command, tmp_path / f"envs_{n_envs}.log")
-    assert (peak[5] - peak[2]) / 3 < 0.4, peak
+    assert (peak[5] - peak[2]) / 3 < 0.55, peak
 
 
 def test_the_shared_render_context_is_freed_before_exit_without_a_traceback():
