@@ -387,6 +387,54 @@ def test_evaluation_parts_run_in_parallel_workers_with_their_own_logs(tmp_path):
         Sweep.load(bad)
 
 
+def test_stop_at_starts_nothing_after_its_time_and_the_same_call_resumes(tmp_path, monkeypatch, capsys):
+    """`--stop-at`: a part running when the time passes finishes, no later one starts and the unfinished run gets no
+    record; the same call later evaluates only the parts left. Past it, nothing starts at all (not even the
+    training); a time that is not one is named."""
+    from datetime import UTC, datetime, timedelta
+
+    from lerobot_predvla.cli import sweep as sweep_cli
+
+    path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"],
+                      eval={"device": "cpu", "tasks": [0, 1, 2, 3], "n_episodes": 4})
+    past = datetime.now(UTC) - timedelta(minutes=1)
+    run = Run("predvla", "libero_object", 0)
+    runner = Runner(Sweep.load(path), tmp_path / "runs", execute=FakeLeRobot(), stop_at=past)
+    outcome = runner.run(configs=["predvla"], progress=False)
+    assert runner.execute.commands == [] and outcome["done"] == outcome["failed"] == []
+    assert outcome["stopped"] == [f"training {run.key} not started: --stop-at {past.isoformat(timespec='minutes')} "
+                                  "passed"]
+
+    class TimePasses(FakeLeRobot):  # the time passes while the first evaluation part runs
+        def __call__(self, command: list[str], log: Path) -> int:
+            code = super().__call__(command, log)
+            if any(c.endswith("lerobot-eval") for c in command):
+                runner.stop_at = past
+            return code
+
+    runner.stop_at, runner.execute = None, TimePasses()
+    outcome = runner.run(configs=["predvla"], progress=False)
+    assert runner.execute.count("lerobot-train") == 1 and runner.execute.count("lerobot-eval") == 1
+    assert outcome["done"] == [] and outcome["stopped"][0].startswith(f"evaluation {run.key} (task1) not started")
+    assert not runner.record_path(run).exists()
+    runner.stop_at, runner.execute = None, FakeLeRobot()
+    assert runner.run(configs=["predvla"], progress=False)["done"] == [run.key]
+    assert [arg(c, "env.task_ids") for c in runner.execute.commands] == ["[1]", "[2]", "[3]"]
+    assert sorted(json.loads(runner.record_path(run).read_text())["tasks"]) == ["0", "1", "2", "3"]
+
+    fake = FakeLeRobot()
+    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir, **kw: Runner(sweep, runs_dir, execute=fake, **kw))
+    argv = ["sweep", str(path), "--runs-dir", str(tmp_path / "runs2")]
+    assert predvla_main([*argv, "--stop-at", past.isoformat()]) == 0 and fake.commands == []
+    assert "predvla sweep: stopped, training predvla/libero_object/seed0 not started" in capsys.readouterr().err
+    for bad in ("25:00", "tomorrow"):
+        with pytest.raises(SystemExit):
+            predvla_main([*argv, "--stop-at", bad])
+        assert "--stop-at: expected HH:MM or an ISO 8601 date and time" in capsys.readouterr().err
+    at = sweep_cli.stop_time("00:00")  # the next midnight, local time
+    assert timedelta(0) < at - datetime.now().astimezone() <= timedelta(days=1) and (at.hour, at.minute) == (0, 0)
+
+
 def test_pool_with_names_a_pool_whose_paired_episodes_pool_too(tmp_path):
     """Seeds 1-2 of error regression and open loop pool with seed 0's: accepted; a pool whose comparisons would
     not pool, a chain of pools or an unknown name is refused, naming the configuration."""
@@ -525,15 +573,18 @@ def test_training_reads_the_features_only_copy(tmp_path):
 
 def test_data_only_makes_the_datasets_without_frames_and_stops(tmp_path, monkeypatch, capsys):
     """`predvla sweep --data-only` runs the `data` stages (here with `image_storage: none`, passed to the
-    conversion) and no training or evaluation; an unknown storage is named."""
+    conversion) and no training or evaluation, none after `--stop-at`; an unknown storage is named."""
     from lerobot_predvla.cli import sweep as sweep_cli
 
     data = {"libero_object": {"hdf5": "out/hdf5", "frontend": "out/frontend", "per_task": 3, "tasks": [0],
                               "vision_weights": "random", "image_storage": "none"}}
     path = sweep_file(tmp_path, seeds=[0], suites=["libero_object"], data=data, eval={"device": "cpu"})
     fake = FakeData()
-    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir: Runner(sweep, runs_dir, execute=fake))
-    assert predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs"), "--data-only"]) == 0
+    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir, **kw: Runner(sweep, runs_dir, execute=fake, **kw))
+    argv = ["sweep", str(path), "--runs-dir", str(tmp_path / "runs"), "--data-only"]
+    assert predvla_main([*argv, "--stop-at", "2000-01-01T00:00"]) == 0 and fake.commands == []  # --stop-at passed
+    assert "stopped, data stage demos of libero_object not started" in capsys.readouterr().err
+    assert predvla_main(argv) == 0
     programs = [c[c.index("lerobot_predvla.cli.main") + 1] for c in fake.commands if "lerobot_predvla.cli.main" in c]
     assert programs == ["demos", "fit-frontend", "convert"] and len(fake.commands) == 3
     assert arg_value(fake.commands[2], "--image-storage") == "none"
@@ -556,12 +607,12 @@ def test_train_only_trains_what_the_runs_need_and_evaluates_nothing(tmp_path, mo
 
     path = sweep_file(tmp_path)
     fake = FakeLeRobot()
-    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir: Runner(sweep, runs_dir, execute=fake))
+    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir, **kw: Runner(sweep, runs_dir, execute=fake, **kw))
     assert predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs"), "--train-only"]) == 0
     assert fake.count("lerobot-train") == 6 and fake.count("lerobot-eval") == 0
     assert "6 trainings finished, 0 failed (no evaluation)" in capsys.readouterr().out
     assert not (tmp_path / "runs" / "records").exists()
     later = FakeLeRobot()
-    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir: Runner(sweep, runs_dir, execute=later))
+    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir, **kw: Runner(sweep, runs_dir, execute=later, **kw))
     assert predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs")]) == 0
     assert later.count("lerobot-train") == 0 and later.count("lerobot-eval") == 10

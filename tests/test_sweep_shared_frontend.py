@@ -29,7 +29,7 @@ def test_a_shared_front_end_is_fitted_once_on_every_suites_demonstrations(tmp_pa
 
     path = sweep_file(tmp_path, seeds=[0], data=shared_data())
     fake = FakeData()
-    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir: Runner(sweep, runs_dir, execute=fake))
+    monkeypatch.setattr(sweep_cli, "Runner", lambda sweep, runs_dir, **kw: Runner(sweep, runs_dir, execute=fake, **kw))
     assert predvla_main(["sweep", str(path), "--runs-dir", str(tmp_path / "runs"), "--data-only"]) == 0
     steps = [program(c) for c in fake.commands]
     assert [(s[0], s[s.index("--suite") + 1] if "--suite" in s else None) for s in steps] == [

@@ -1,11 +1,13 @@
 """`predvla sweep`: train and evaluate configurations x suites x seeds from a sweep file, resumably."""
 
 import argparse
+import re
 import shlex
 import sys
+from datetime import datetime, timedelta
 from pathlib import Path
 
-from lerobot_predvla.sweep import Runner, Sweep, SweepError, parse_shard
+from lerobot_predvla.sweep import Runner, Sweep, SweepError, SweepStopped, parse_shard
 
 
 def _ints(text: str) -> list[int]:
@@ -14,6 +16,21 @@ def _ints(text: str) -> list[int]:
 
 def _names(text: str) -> list[str]:
     return [x for x in text.split(",") if x]
+
+
+def stop_time(text: str) -> datetime:
+    """`--stop-at`: HH:MM (its next occurrence, local time) or an ISO 8601 date and time (local unless it says)."""
+    now = datetime.now().astimezone()
+    try:
+        if re.fullmatch(r"\d{1,2}:\d{2}", text):
+            hour, minute = map(int, text.split(":"))
+            at = now.replace(hour=hour, minute=minute, second=0, microsecond=0)
+            return at if at > now else at + timedelta(days=1)
+        at = datetime.fromisoformat(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected HH:MM or an ISO 8601 date and time such as 2026-12-08T01:00, got {text!r}") from None
+    return at if at.tzinfo else at.astimezone()
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -42,6 +59,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--eval-workers", type=int, default=None,
                         help="Task parts of an evaluation run at once, one lerobot-eval process each (with eval.tasks; "
                              "e.g. 2 on a 2-core CPU, with OMP_NUM_THREADS=1).")
+    parser.add_argument("--stop-at", type=stop_time, default=None, metavar="TIME",
+                        help="Start no data stage, training or evaluation part after TIME (HH:MM, its next "
+                             "occurrence, or an ISO 8601 date and time); those running then finish, and the same "
+                             "command later resumes the rest. Set it a part's length before the machine goes away.")
     parser.add_argument("--dry-run", action="store_true", help="Print this shard's commands and run nothing.")
     parser.add_argument("--data-only", action="store_true",
                         help="Make the suites' datasets (the file's `data` stages, each timed in "
@@ -84,13 +105,19 @@ def run(args: argparse.Namespace) -> int:
         apply_flags(sweep, args)
         sweep.validate(args.sweep_file)
         shard = parse_shard(args.shard)
-        runner = Runner(sweep, args.runs_dir.resolve())
+        runner = Runner(sweep, args.runs_dir.resolve(), stop_at=args.stop_at)
         if args.dry_run:
             for command in runner.pending_commands(args.configs, shard):
                 print(shlex.join(command))
             return 0
         if args.data_only:
-            made = [runner.make_data(suite) for suite in sweep.settings.suites]
+            made = []
+            try:
+                for suite in sweep.settings.suites:
+                    made.append(runner.make_data(suite))
+            except SweepStopped as stop:
+                print_stopped(str(stop))
+                return 0 if all(made) else 1
             print(f"predvla sweep: datasets of {sum(made)} of {len(made)} suites ready; stage times in "
                   f"{args.runs_dir / 'data'}")
             return 0 if all(made) else 1
@@ -101,7 +128,13 @@ def run(args: argparse.Namespace) -> int:
     if args.train_only:
         print(f"predvla sweep: {len(outcome['trained'])} trainings finished, {len(outcome['failed'])} failed "
               f"(no evaluation); checkpoints in {args.runs_dir / 'train'}")
-        return 1 if outcome["failed"] else 0
-    print(f"predvla sweep: {len(outcome['done'])} runs done, {len(outcome['skipped'])} already done, "
-          f"{len(outcome['failed'])} failed; records in {args.runs_dir / 'records'}")
+    else:
+        print(f"predvla sweep: {len(outcome['done'])} runs done, {len(outcome['skipped'])} already done, "
+              f"{len(outcome['failed'])} failed; records in {args.runs_dir / 'records'}")
+    for stop in outcome["stopped"]:
+        print_stopped(stop)
     return 1 if outcome["failed"] else 0
+
+
+def print_stopped(why: str) -> None:
+    print(f"predvla sweep: stopped, {why}; the same command resumes what is left", file=sys.stderr)

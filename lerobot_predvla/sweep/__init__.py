@@ -30,7 +30,7 @@ from lerobot_predvla.sweep.spec import (
     SweepError,
     parse_shard,
 )
-from lerobot_predvla.sweep.workspace import subprocess_executor
+from lerobot_predvla.sweep.workspace import SweepStopped, subprocess_executor
 
 __all__ = [
     "PAPER_BATCH_SIZE",
@@ -41,6 +41,7 @@ __all__ = [
     "Runner",
     "Sweep",
     "SweepError",
+    "SweepStopped",
     "parse_shard",
     "subprocess_executor",
 ]

@@ -175,8 +175,9 @@ class DataStages(Workspace):
             code = self.execute(command, self.log_path("data", suite, 0, stage))
             return stage, command, code, time.monotonic() - start
 
-        for _, group in groupby(self.data_commands(suite), key=lambda item: item[0].split(".tasks")[0]):
+        for name, group in groupby(self.data_commands(suite), key=lambda item: item[0].split(".tasks")[0]):
             group = list(group)
+            self.check_stop_at(f"data stage {name} of {suite}")
             with ThreadPoolExecutor(max_workers=len(group)) as pool:
                 finished = list(pool.map(lambda item: run_stage(*item), group))
             stages = json.loads(stages_file.read_text()) if stages_file.is_file() else {}

@@ -115,6 +115,7 @@ class Evaluation(Workspace):
         wall time is kept beside it."""
         if (out / EVAL_INFO_FILE).is_file():
             return True
+        self.check_stop_at(f"evaluation {run.key} ({out.name})")
         shutil.rmtree(out, ignore_errors=True)  # a killed evaluation is redone from scratch
         start = time.monotonic()
         code = self.execute(command, log)

@@ -11,6 +11,7 @@ from lerobot_predvla.sweep.evaluation import Evaluation
 from lerobot_predvla.sweep.layout import PLAN_FILE, TRAIN_DONE_FILE
 from lerobot_predvla.sweep.spec import ConfigSpec, Run, SweepError
 from lerobot_predvla.sweep.training import Training
+from lerobot_predvla.sweep.workspace import SweepStopped
 from lerobot_predvla.utils.checkpoints import last_pretrained
 from lerobot_predvla.utils.io import atomic_write_json
 
@@ -106,13 +107,23 @@ class Runner(Training, Evaluation):
     ) -> dict[str, list[str]]:
         """Run (or skip) this shard's runs. Returns run keys by outcome: done, skipped, failed, and with `train_only`
         (train what the pending runs need, evaluate nothing) `trained`: the trainings (config/suite/seed) that are
-        finished and evaluable."""
+        finished and evaluable. Once `stop_at` has passed no stage starts: `stopped` then holds why (one line), and
+        the runs left are in none of the lists."""
         self.write_plan(self.sweep.runs(configs), configs)
         units = self.shard_units(configs, shard)
-        outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": []}
+        outcome: dict[str, list[str]] = {"done": [], "skipped": [], "failed": [], "stopped": []}
         if train_only:
             outcome["trained"] = []
         bar = tqdm(total=sum(len(r) for _, r in units), desc=f"sweep shard {shard[0]}/{shard[1]}", disable=not progress)
+        try:
+            self.run_units(units, outcome, bar, train_only)
+        except SweepStopped as stop:
+            outcome["stopped"].append(str(stop))
+        bar.close()
+        return outcome
+
+    def run_units(self, units: list, outcome: dict[str, list[str]], bar: tqdm, train_only: bool) -> None:
+        """`run`'s loop: per training unit, its training (or its finished record), then its pending evaluations."""
         for (trained, suite, seed), unit_runs in units:
             pending = [r for r in unit_runs if not self.is_recorded(r)]
             outcome["skipped"] += [r.key for r in unit_runs if r not in pending]
@@ -135,5 +146,3 @@ class Runner(Training, Evaluation):
                 ok = train_result is not None and self.evaluate(run, train_result)
                 outcome["done" if ok else "failed"].append(run.key)
                 bar.update(1)
-        bar.close()
-        return outcome

@@ -118,6 +118,7 @@ class Training(DataStages):
         else:
             shutil.rmtree(out, ignore_errors=True)  # started but no checkpoint yet: lerobot-train needs a new dir
             command, resumed = self.train_command(spec, suite, seed), False
+        self.check_stop_at(f"training {spec.name}/{suite}/seed{seed}")
         start = time.monotonic()
         code = self.execute(command, self.log_path(spec.name, suite, seed, "train"))
         if code != 0 or not (last / "model.safetensors").is_file():

@@ -5,6 +5,7 @@ import subprocess
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 
 from lerobot_predvla.lerobot_commands import ACCELERATE, LEROBOT_EVAL, LEROBOT_TRAIN, TORCHRUN
@@ -19,6 +20,10 @@ from lerobot_predvla.sweep.logs import compact_log
 from lerobot_predvla.sweep.spec import Run, Sweep
 
 Executor = Callable[[list[str], Path], int]  # (command, log file) -> exit code
+
+
+class SweepStopped(Exception):
+    """`stop_at` passed before a stage (a data stage, a training, an evaluation part) started: nothing of it ran."""
 
 
 def subprocess_executor(command: list[str], log: Path) -> int:
@@ -43,6 +48,13 @@ class Workspace:
     lerobot_eval: str = LEROBOT_EVAL
     accelerate: str = ACCELERATE
     torchrun: str = TORCHRUN
+    # No stage starts after this time (`predvla sweep --stop-at`); those running finish, a later call resumes the rest.
+    stop_at: datetime | None = None
+
+    def check_stop_at(self, stage: str) -> None:
+        """Raise `SweepStopped` instead of starting `stage` once `stop_at` has passed."""
+        if self.stop_at is not None and datetime.now(self.stop_at.tzinfo) >= self.stop_at:
+            raise SweepStopped(f"{stage} not started: --stop-at {self.stop_at.isoformat(timespec='minutes')} passed")
 
     def train_dir(self, config: str, suite: str, seed: int) -> Path:
         return train_run_dir(self.runs_dir, config, suite, seed)
