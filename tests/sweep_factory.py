@@ -2,6 +2,7 @@
 
 import argparse
 import json
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import torch
@@ -84,6 +85,20 @@ class FakeLeRobot:
 
     def count(self, program: str) -> int:
         return sum(any(c.endswith(program) for c in cmd) for cmd in self.commands)
+
+
+class ClockRunsOut(FakeLeRobot):
+    """A FakeLeRobot after whose first lerobot-eval call the runner's `--stop-at` time has passed."""
+
+    def __init__(self, runner, **kwargs):
+        super().__init__(**kwargs)
+        self.runner = runner
+
+    def __call__(self, command: list[str], log: Path) -> int:
+        code = super().__call__(command, log)
+        if any(c.endswith("lerobot-eval") for c in command):
+            self.runner.stop_at = datetime.now(UTC) - timedelta(minutes=1)
+        return code
 
 
 class FakeData(FakeLeRobot):

@@ -11,7 +11,7 @@ import pytest
 import torch
 import yaml
 from safetensors.torch import save_file
-from sweep_factory import FakeData, FakeLeRobot, arg, cli_flags, sweep_file
+from sweep_factory import ClockRunsOut, FakeData, FakeLeRobot, arg, cli_flags, sweep_file
 
 from lerobot_predvla.cli.main import main as predvla_main
 from lerobot_predvla.report import write_report
@@ -405,14 +405,7 @@ def test_stop_at_starts_nothing_after_its_time_and_the_same_call_resumes(tmp_pat
     assert outcome["stopped"] == [f"training {run.key} not started: --stop-at {past.isoformat(timespec='minutes')} "
                                   "passed"]
 
-    class TimePasses(FakeLeRobot):  # the time passes while the first evaluation part runs
-        def __call__(self, command: list[str], log: Path) -> int:
-            code = super().__call__(command, log)
-            if any(c.endswith("lerobot-eval") for c in command):
-                runner.stop_at = past
-            return code
-
-    runner.stop_at, runner.execute = None, TimePasses()
+    runner.stop_at, runner.execute = None, ClockRunsOut(runner)  # the time passes while the first part runs
     outcome = runner.run(configs=["predvla"], progress=False)
     assert runner.execute.count("lerobot-train") == 1 and runner.execute.count("lerobot-eval") == 1
     assert outcome["done"] == [] and outcome["stopped"][0].startswith(f"evaluation {run.key} (task1) not started")

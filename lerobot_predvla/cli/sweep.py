@@ -8,6 +8,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 
 from lerobot_predvla.sweep import Runner, Sweep, SweepError, SweepStopped, parse_shard
+from lerobot_predvla.sweep.status import format_status, sweep_status
 
 
 def _ints(text: str) -> list[int]:
@@ -64,6 +65,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                              "occurrence, or an ISO 8601 date and time); those running then finish, and the same "
                              "command later resumes the rest. Set it a part's length before the machine goes away.")
     parser.add_argument("--dry-run", action="store_true", help="Print this shard's commands and run nothing.")
+    parser.add_argument("--status", action="store_true",
+                        help="Print where each run stands (training, evaluation parts finished, successes so far, "
+                             "time left at the finished parts' median) and run nothing.")
     parser.add_argument("--data-only", action="store_true",
                         help="Make the suites' datasets (the file's `data` stages, each timed in "
                              "RUNS_DIR/data/<suite>.json) and stop before any training.")
@@ -106,6 +110,9 @@ def run(args: argparse.Namespace) -> int:
         sweep.validate(args.sweep_file)
         shard = parse_shard(args.shard)
         runner = Runner(sweep, args.runs_dir.resolve(), stop_at=args.stop_at)
+        if args.status:
+            print(format_status(sweep_status(runner, args.configs, shard), sweep.settings.eval_workers))
+            return 0
         if args.dry_run:
             for command in runner.pending_commands(args.configs, shard):
                 print(shlex.join(command))
