@@ -35,8 +35,11 @@ def test_status_follows_a_sweep_through_its_trainings_and_evaluation_parts(tmp_p
     table = format_status(list(rows.values()), workers=2).splitlines()
     assert table[0].split() == ["run", "training", "evaluation", "parts", "successes", "left", "(est.)"]
     assert table[1].split() == ["predvla/libero_object/seed0", "done", "1/4", "4/4", "0.3", "h"]
-    assert table[-1] == ("0 of 3 runs recorded; evaluation left about 0.3 h and 2 runs with no timed part yet, "
-                         "2 part(s) at once; trainings not counted")
+    assert table[-1] == ("0 of 3 runs recorded; evaluation left about 0.3 h (not counting 2 runs with no timed part "
+                         "yet) at 2 parts at once; trainings not counted")
+    assert format_status(list(rows.values())[1:2], workers=1).splitlines()[-1] == (
+        "0 of 1 runs recorded; evaluation left unknown (not counting 1 run with no timed part yet) at 1 part at once; "
+        "trainings not counted")
 
     fake = FakeLeRobot()
     monkeypatch.setattr("lerobot_predvla.cli.sweep.Runner",

@@ -76,9 +76,9 @@ def format_status(rows: list[RunStatus], workers: int) -> str:
     widths = [max(len(line[i]) for line in table) for i in range(len(header))]
     lines = ["  ".join(cell.ljust(width) for cell, width in zip(line, widths, strict=True)).rstrip() for line in table]
     left = [r.seconds_left(workers) for r in rows]
-    known = sum(s for s in left if s is not None)
     unknown = sum(s is None for s in left)
-    lines.append(f"{sum(r.recorded for r in rows)} of {len(rows)} runs recorded; evaluation left about {hours(known)}"
-                 + (f" and {unknown} runs with no timed part yet" if unknown else "")
-                 + f", {workers} part(s) at once; trainings not counted")
+    known = f"about {hours(sum(s for s in left if s is not None))}" if unknown < len(rows) else "unknown"
+    untimed = f" (not counting {unknown} {'run' if unknown == 1 else 'runs'} with no timed part yet)" if unknown else ""
+    lines.append(f"{sum(r.recorded for r in rows)} of {len(rows)} runs recorded; evaluation left {known}{untimed} "
+                 f"at {workers} {'part' if workers == 1 else 'parts'} at once; trainings not counted")
     return "\n".join(lines)
