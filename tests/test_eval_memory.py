@@ -39,7 +39,7 @@ def test_sub_environments_share_one_render_context_with_robosuites_pixels():
     for sub_env in venv.envs:
         assert sub_env._env.env.sim._render_context_offscreen is None  # no robosuite renderer per environment
     # robosuite's own renderer (LIBERO's OffScreenRenderEnv, its context made current) on the same states.
-    reference = OffScreenRenderEnv(bddl_file_name=venv.envs[0]._task_bddl_file, camera_heights=128,
+    reference = OffScreenRenderEnv(bddl_file_name=venv.envs[0].unwrapped._task_bddl_file, camera_heights=128,
                                    camera_widths=128, use_camera_obs=False)
     reference.reset()
     flip = -1 if macros.IMAGE_CONVENTION == "opencv" else 1
@@ -69,7 +69,7 @@ def test_a_robosuite_renderer_freed_later_leaves_the_shared_context_intact():
 
     venv = PredVLALiberoEnv(task=SUITE, task_ids=[0]).create_envs(n_envs=1)[SUITE][0]
     venv.reset(seed=[0])
-    sub_env = venv.envs[0]
+    sub_env = venv.envs[0].unwrapped
     before = sub_env._render_cameras()
     reference = OffScreenRenderEnv(bddl_file_name=sub_env._task_bddl_file, camera_heights=128, camera_widths=128)
     reference.reset()

@@ -72,7 +72,7 @@ class StoveTurner(nn.Module):
 
     def select_action(self, observation: dict) -> torch.Tensor:
         if not self.instructions:
-            env = self.venv.envs[0]._env.env
+            env = self.venv.envs[0].unwrapped._env.env
             for joint in env.get_object("flat_stove_1").joints:
                 env.sim.data.qpos[env.sim.model.get_joint_qpos_addr(joint)] = 1.0  # turned on from 0.5 rad
             env.sim.forward()

@@ -139,7 +139,7 @@ def test_predvla_libero_env_observations():
     venv = cfg.create_envs(n_envs=1)[SUITE][0]
     env_pre, _post = cfg.get_env_processors()
     obs, _info = venv.reset(seed=[0])
-    inner = venv.envs[0]._env
+    inner = venv.envs[0].unwrapped._env
     # The demonstrations' camera env (`predvla demos` renders kept episodes in it by replaying states).
     demo_env = libero_env.make_env(libero_env.task_spec(SUITE, 0), render=True)
     libero_env.random_reset(demo_env, 0)
@@ -163,6 +163,35 @@ def test_predvla_libero_env_observations():
     venv.close()
     demo_env.close()
     assert fresh_flags == [1, 0, 0, 0, 1, 0]
+
+
+def test_a_finished_sub_environment_is_frozen_until_the_next_rollout():
+    """Once a sub-environment's episode ends (here a non-finite action faults it), its steps and Gymnasium's autoreset
+    replay its last observation with `image_fresh` 0 and simulate nothing while the other goes on; the next rollout's
+    reset (LeRobot's NEW_ROLLOUT_OPTION) starts it again."""
+    from lerobot.envs.utils import NEW_ROLLOUT_OPTION
+
+    from lerobot_predvla.sims.libero.env_config import PredVLALiberoEnv
+
+    venv = PredVLALiberoEnv(task=SUITE, task_ids=[0]).create_envs(n_envs=2)[SUITE][0]
+    venv.reset(seed=[0, 1], options={NEW_ROLLOUT_OPTION: True})
+    finished, going = (env.unwrapped for env in venv.envs)
+    action = np.zeros((2, 7), dtype=np.float32)
+    fault = action.copy()
+    fault[0] = np.nan
+    _obs, _reward, terminated, _truncated, _info = venv.step(fault)
+    assert terminated.tolist() == [True, False]
+    fresh = []
+    for _ in range(6):  # the first of these is Gymnasium's autoreset of sub-environment 0
+        obs, _reward, _terminated, _truncated, _info = venv.step(action)
+        fresh.append(obs["image_fresh"][:, 0].tolist())
+    assert [row[0] for row in fresh] == [0] * 6 and [row[1] for row in fresh] == [0, 0, 1, 0, 0, 0]
+    assert (finished._steps_since_reset, finished._rollouts, going._steps_since_reset) == (1, 1, 7)
+    venv.reset(seed=[2, 3], options={NEW_ROLLOUT_OPTION: True})
+    assert (finished._rollouts, finished._steps_since_reset, finished.nonfinite_actions) == (2, 0, 1)
+    venv.step(action)
+    assert finished._steps_since_reset == 1
+    venv.close()
 
 
 def test_lerobots_libero_env_gives_predvla_joint_proprio():

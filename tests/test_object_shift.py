@@ -126,7 +126,7 @@ def test_shifted_object_and_target_rest_where_they_were_put_and_the_shifts_are_r
 
     venv, reset_info, _ = _episode("libero_object", object_shift_cm=4, target_shift_cm=3, object_shift_pattern="cross")
     try:
-        env = venv.envs[0]
+        env = venv.envs[0].unwrapped
         (record,) = env.shift_records
         assert record["episode_ix"] == 0 and record["init_state"] == 0 and record["settled"]
         official = official_init_states("libero_object", 0)[0]
@@ -178,7 +178,7 @@ def test_variant_runs_a_few_steps(task, instruction):
     try:
         assert venv.call("task_description") == (instruction,)
         assert "fault" not in info and venv.get_attr("faults") == ([],)
-        assert Path(venv.envs[0]._task_bddl_file).is_file()
+        assert Path(venv.envs[0].unwrapped._task_bddl_file).is_file()
     finally:
         venv.close()
 
@@ -217,7 +217,7 @@ def test_counted_episodes_keep_their_init_states_across_gymnasiums_autoresets():
         assert terminated.tolist() == [True, False]
         venv.step(np.concatenate([IDLE, IDLE]))  # Gymnasium's autoreset of sub-environment 0
         venv.reset(seed=[0, 0], options=new_rollout)
-        assert [r["init_state"] for r in venv.envs[0].shift_records] == [0, 2]
-        assert [r["init_state"] for r in venv.envs[1].shift_records] == [1, 3]
+        assert [r["init_state"] for r in venv.envs[0].unwrapped.shift_records] == [0, 2]
+        assert [r["init_state"] for r in venv.envs[1].unwrapped.shift_records] == [1, 3]
     finally:
         venv.close()

@@ -126,8 +126,8 @@ def test_live_poses_equal_the_replayed_ones_and_are_the_gripper_frame_poses():
     cfg = PredVLALiberoEnv(task=SUITE, task_ids=[0], oracle=True)
     venv = cfg.create_envs(n_envs=1)[SUITE][0]
     obs, _ = venv.reset(seed=[0])
-    inner = venv.envs[0]._env
-    objects = venv.envs[0].oracle_objects
+    inner = venv.envs[0].unwrapped._env
+    objects = venv.envs[0].unwrapped.oracle_objects
     assert objects == OBJECTS[SOUP]
     replay = libero_env.make_env(libero_env.task_spec(SUITE, 0))
     replay.reset()

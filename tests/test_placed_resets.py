@@ -101,7 +101,7 @@ def test_no_spread_leaves_the_randomised_reset_as_it_was():
     demonstrations' unshifted reset of the same seed puts them after as many idle steps."""
     venv, _, (positions,) = _reset(0.0, 1)
     try:
-        assert venv.envs[0].placements is None and venv.envs[0].shift_records == []
+        assert venv.envs[0].unwrapped.placements is None and venv.envs[0].unwrapped.shift_records == []
     finally:
         venv.close()
     _, expected = _demonstration_start(SEED, 0.0, init_noise=0.0, settle_steps=10)

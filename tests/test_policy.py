@@ -248,6 +248,24 @@ def test_batched_environments_match_single_runs():
         torch.testing.assert_close(run(policy, single)[:, 0], both[:, i], rtol=1e-3, atol=1e-3)
 
 
+@pytest.mark.parametrize("er_adam_state", ["fresh", "carried"])
+def test_a_rows_actions_do_not_depend_on_what_the_other_rows_see(er_adam_state):
+    """lerobot-eval steps the whole batch until its last episode ends, so the rows of finished episodes keep feeding
+    the policy: today's discarded episodes, or their terminal observation again once `predvla_libero` freezes them.
+    Neither may change another row's actions, bit for bit (same batch size, so the same kernels)."""
+    policy = randomised_policy(er_iterations=3, er_window=6, er_adam_state=er_adam_state)
+    observations = stream(10, batch=3, seed=3)
+    other = [{k: v.clone() for k, v in o.items()} for o in observations]
+    for t, o in enumerate(other[4:], start=4):
+        for key, value in o.items():
+            if key != "observation.language_features":
+                value[1] = observation(3, 500 + t)[key][1]  # row 1: another episode
+                value[2] = observations[4][key][2]  # row 2: its step-4 observation again (a frozen replay)
+    reference, changed = run(policy, observations), run(policy, other)
+    assert torch.equal(reference[:, 0], changed[:, 0])
+    assert not torch.equal(reference[5:, 1:], changed[5:, 1:])
+
+
 def test_reset_clears_the_window():
     policy = randomised_policy(er_iterations=2, er_window=4)
     first = run(policy, stream(6, seed=4))

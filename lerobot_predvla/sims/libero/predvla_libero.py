@@ -9,6 +9,13 @@ process memory (docs/speed.md, "Evaluation memory"). The images are the same, bi
 A fault in one sub-environment (an exception from MuJoCo or robosuite, a non-finite simulator state, an
 unstable-simulation warning or a non-finite action) ends that episode as a failure with its reason; the
 other sub-environments and the run go on. Faults are kept in `faults` and listed in `eval_info.json`.
+
+lerobot-eval steps a batch until its last episode ends. A sub-environment whose episode has ended replays its last
+transition instead of simulating (`FreezeFinishedEpisode`, LeRobot's `FreezeAfterEpisodeEnd`, which LeRobot itself
+applies to its asynchronous environments only): without it, Gymnasium's autoreset starts an episode there that
+lerobot-eval discards, and it is simulated and rendered to the end of the batch. The episodes lerobot-eval keeps are
+the same, bit for bit: a row's actions do not depend on what the other rows see
+(tests/test_policy.py::test_a_rows_actions_do_not_depend_on_what_the_other_rows_see).
 """
 
 import atexit
@@ -35,7 +42,7 @@ check_libero_config()  # before LIBERO reads its config: a stale one otherwise f
 use_headless_gl()  # before robosuite chooses its GL context
 
 from lerobot.envs.libero import LiberoEnv, _select_task_ids, parse_camera_names  # noqa: E402
-from lerobot.envs.utils import NEW_ROLLOUT_OPTION  # noqa: E402
+from lerobot.envs.utils import NEW_ROLLOUT_OPTION, FreezeAfterEpisodeEnd  # noqa: E402
 from libero.libero.envs.bddl_utils import robosuite_parse_problem  # noqa: E402
 from libero.libero.envs.env_wrapper import ControlEnv  # noqa: E402
 from robosuite import macros  # noqa: E402
@@ -394,8 +401,28 @@ class SparseRenderLiberoEnv(LiberoEnv):
         return self._last_observation, 0.0, True, False, info
 
 
+class FreezeFinishedEpisode(FreezeAfterEpisodeEnd):
+    """LeRobot's `FreezeAfterEpisodeEnd` (once an episode has ended, further steps and Gymnasium's autoreset replay
+    its last transition; a reset with `NEW_ROLLOUT_OPTION` starts the next rollout) whose replays carry
+    `image_fresh = 0`: a finished sub-environment never makes the front end encode the batch's frames again. The
+    sub-environment itself is `unwrapped`."""
+
+    def step(self, action):
+        transition = super().step(action)
+        if self._frozen is not None and self._frozen[0][IMAGE_FRESH][0]:
+            observation = {**self._frozen[0], IMAGE_FRESH: np.zeros(1, dtype=np.uint8)}
+            self._frozen = (observation, *self._frozen[1:])
+        return transition
+
+
+def frozen_env(**kwargs) -> FreezeFinishedEpisode:
+    """A `SparseRenderLiberoEnv(**kwargs)` that freezes once its episode ends."""
+    return FreezeFinishedEpisode(SparseRenderLiberoEnv(**kwargs))
+
+
 def create_envs(cfg, n_envs: int, env_cls) -> dict[str, dict[int, gym.vector.VectorEnv]]:
-    """One vector env of `n_envs` rollouts per selected task, as `lerobot.envs.libero.create_libero_envs`."""
+    """One vector env of `n_envs` rollouts per selected task, as `lerobot.envs.libero.create_libero_envs`, each
+    sub-environment frozen once its episode ends (`FreezeFinishedEpisode`)."""
     camera_names = parse_camera_names(cfg.camera_name)
     kwargs = dict(cfg.gym_kwargs)
     task_ids = kwargs.pop("task_ids", None)
@@ -409,7 +436,7 @@ def create_envs(cfg, n_envs: int, env_cls) -> dict[str, dict[int, gym.vector.Vec
             instruction_task = instructions.task_for(task_id, len(suite.tasks), suite_name)  # validated before any env
             fns = [
                 partial(
-                    SparseRenderLiberoEnv,
+                    frozen_env,
                     task_suite=suite,
                     task_id=task_id,
                     task_suite_name=base_name,
