@@ -2,6 +2,7 @@
 training (finished, at which saved step, or not started), its evaluation parts finished and their successes so far,
 and the time its remaining parts should take at the median wall time of its finished ones."""
 
+import math
 import statistics
 from dataclasses import dataclass
 
@@ -30,7 +31,7 @@ class RunStatus:
         walls = [w for w in self.part_walls_s if w > 0]
         if not walls:
             return None
-        return statistics.median(walls) * -(-(self.parts - self.parts_done) // workers)
+        return statistics.median(walls) * math.ceil((self.parts - self.parts_done) / workers)
 
 
 def training_state(runner: Runner, config: str, suite: str, seed: int) -> str:
