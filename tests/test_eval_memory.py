@@ -37,14 +37,14 @@ def test_sub_environments_share_one_render_context_with_robosuites_pixels():
     obs, _info = venv.reset(seed=[0, 1])  # a second hard reset: new models, same rendering assets
     assert predvla_libero.RENDERER.contexts_built - built <= 1  # at most one: none if a previous test left it
     for sub_env in venv.envs:
-        assert sub_env._env.env.sim._render_context_offscreen is None  # no robosuite renderer per environment
+        assert sub_env.unwrapped._env.env.sim._render_context_offscreen is None  # no robosuite renderer per environment
     # robosuite's own renderer (LIBERO's OffScreenRenderEnv, its context made current) on the same states.
     reference = OffScreenRenderEnv(bddl_file_name=venv.envs[0].unwrapped._task_bddl_file, camera_heights=128,
                                    camera_widths=128, use_camera_obs=False)
     reference.reset()
     flip = -1 if macros.IMAGE_CONVENTION == "opencv" else 1
     for i, sub_env in enumerate(venv.envs):
-        reference.set_init_state(sub_env._env.get_sim_state())
+        reference.set_init_state(sub_env.unwrapped._env.get_sim_state())
         sim = reference.env.sim
         for camera, key in zip(SIM_CAMERAS.values(), ("image", "image2"), strict=True):
             sim._render_context_offscreen.gl_ctx.make_current()

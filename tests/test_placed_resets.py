@@ -47,7 +47,7 @@ def _reset(spread_cm: float, n_envs: int):
                            placement_spread_cm=spread_cm)
     venv = cfg.create_envs(n_envs)[SUITE][TASK_ID]
     _, info = venv.reset(seed=[SEED + j for j in range(n_envs)], options=NEW_ROLLOUT)
-    return venv, info, [object_positions(env._env) for env in venv.envs]
+    return venv, info, [object_positions(env.unwrapped._env) for env in venv.envs]
 
 
 def _demonstration_start(seed: int, spread_cm: float, init_noise: float, settle_steps: int = 0):
@@ -77,7 +77,7 @@ def test_episodes_start_from_the_demonstrations_shifted_placements():
 
     venv, info, _ = _reset(SPREAD_CM, 2)
     try:
-        records = [r for env in venv.envs for r in env.shift_records]
+        records = [r for env in venv.envs for r in env.unwrapped.shift_records]
         summary = shift_summary({SUITE: {TASK_ID: venv}})
     finally:
         venv.close()
@@ -143,8 +143,8 @@ def test_blind_replay_on_resets_starts_where_the_evaluation_env_starts(spread_cm
 
     venv, _, _ = _reset(spread_cm, 2)
     try:
-        expected = [env._env.get_sim_state() for env in venv.envs]
-        records = [r for env in venv.envs for r in env.shift_records]
+        expected = [env.unwrapped._env.get_sim_state() for env in venv.envs]
+        records = [r for env in venv.envs for r in env.unwrapped.shift_records]
     finally:
         venv.close()
     settings = blind_replay.Settings(states=(), resets=ResetSpec(seed=SEED, episodes=2, placement_spread_cm=spread_cm))
