@@ -4,15 +4,15 @@ lerobot-eval discards, as before the freeze), in alternation, with the floor: th
 count, one sub-environment at a time.
 
     python benchmarks/bench_eval_freeze.py --envs 10 --cap 280 --repeats 2
-    python benchmarks/bench_eval_freeze.py --checkpoint checkpoints/predvla_libero_object --envs 10 --cap 280
+    python benchmarks/bench_eval_freeze.py --checkpoint checkpoints/predvla_libero_object --task 2 --envs 10 --cap 280
 
 libero_object task 0, `render_interval` 4 (error regression's), a fixed random action sequence; sub-environment i's
 episode ends at step `cap * (i + 1) / (envs + 1)` (a non-finite action faults it, which ends it as a failure), the
 last one at the cap. The policy's time per batch step is the same either way and is left out.
 
-With `--checkpoint`, instead: `lerobot-eval` of that policy (task 0, official init states, one batch of `--envs`
-episodes), once frozen and once simulated, each in a fresh process; it prints both wall times and checks that every
-episode's actions up to its end are the same in both, bit for bit.
+With `--checkpoint`, instead: `lerobot-eval` of that policy (task `--task`, official init states, one batch of
+`--envs` episodes), once frozen and once simulated, each in a fresh process; it prints both wall times and checks
+that every episode's actions up to its end are the same in both, bit for bit.
 """
 
 import argparse
@@ -91,13 +91,13 @@ np.savez(out, actions=np.stack(actions), ends=np.stack(ends), seconds=time.perf_
 """
 
 
-def policy_runs(checkpoint: Path, envs: int, cap: int) -> None:
+def policy_runs(checkpoint: Path, task: int, envs: int, cap: int) -> None:
     """lerobot-eval of `checkpoint`, frozen and simulated; wall times and whether the counted actions agree."""
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
         for mode in ("frozen", "simulated"):
             arguments = [f"--policy.path={checkpoint}", "--policy.device=cpu", "--env.type=predvla_libero",
-                         "--env.task=libero_object", "--env.task_ids=[0]", f"--env.episode_length={cap}",
+                         "--env.task=libero_object", f"--env.task_ids=[{task}]", f"--env.episode_length={cap}",
                          f"--eval.n_episodes={envs}", f"--eval.batch_size={envs}", "--eval.use_async_envs=false",
                          "--seed=0", f"--output_dir={tmp}/{mode}"]
             subprocess.run([sys.executable, "-c", EVAL_CHILD, mode, f"{tmp}/{mode}.npz", *arguments], check=True)
@@ -107,7 +107,7 @@ def policy_runs(checkpoint: Path, envs: int, cap: int) -> None:
     last = np.where(ended, frozen["ends"].argmax(axis=0), len(frozen["ends"]) - 1)
     same = all(np.array_equal(frozen["actions"][: end + 1, row], simulated["actions"][: end + 1, row])
                for row, end in enumerate(last))
-    print(f"lerobot-eval, {envs} episodes of task 0, episodes ending at steps {sorted((last + 1).tolist())}:")
+    print(f"lerobot-eval, {envs} episodes of task {task}, episodes ending at steps {sorted((last + 1).tolist())}:")
     print(f"frozen {frozen['seconds']:.1f} s, simulated {simulated['seconds']:.1f} s: "
           f"{simulated['seconds'] / frozen['seconds']:.2f}x faster; every episode's actions the same: {same}")
 
@@ -119,9 +119,10 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2, help="batches per setting, alternating (median)")
     parser.add_argument("--checkpoint", type=Path, default=None,
                         help="time lerobot-eval of this policy instead, and check its actions agree")
+    parser.add_argument("--task", type=int, default=0, help="libero_object task of the --checkpoint evaluation")
     args = parser.parse_args()
     if args.checkpoint is not None:
-        policy_runs(args.checkpoint, args.envs, args.cap)
+        policy_runs(args.checkpoint, args.task, args.envs, args.cap)
         return
     times: dict[str, list[float]] = {"frozen": [], "simulated": [], "floor": []}
     for seed in range(args.repeats):
