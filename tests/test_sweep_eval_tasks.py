@@ -33,7 +33,7 @@ def test_a_later_call_for_other_tasks_evaluates_them_and_extends_the_record(tmp_
     later = FakeLeRobot()
     runner = runner_for(tmp_path, later, eval_tasks=[2, 3])
     assert runner.pending_commands(["predvla"], (0, 1)) and runner.run(configs=["predvla"], progress=False) == {
-        "done": [RUN.key], "skipped": [], "failed": []}
+        "done": [RUN.key], "skipped": [], "failed": [], "stopped": []}
     assert evaluated_tasks(later) == ["[2]", "[3]"] and later.count("lerobot-train") == 0
     record = json.loads(runner.record_path(RUN).read_text())
     assert record["eval_tasks"] == [0, 1, 2, 3]
