@@ -31,6 +31,11 @@ import numpy as np
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 
+def episode_ends(envs: int, cap: int) -> list[int]:
+    """The step at which each sub-environment's episode ends: spread over the cap, the last one at it."""
+    return [cap * (i + 1) // (envs + 1) for i in range(envs - 1)] + [cap]
+
+
 def batch_seconds(frozen: bool, envs: int, cap: int, seed: int) -> float:
     """Wall seconds of one batch of `envs` episodes (reset excluded), ends spread as the module says."""
     from lerobot.envs.utils import NEW_ROLLOUT_OPTION
@@ -44,7 +49,7 @@ def batch_seconds(frozen: bool, envs: int, cap: int, seed: int) -> float:
                    episode_length=cap) for i in range(envs)]
     venv = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode.NEXT_STEP)
     venv.reset(seed=list(range(seed, seed + envs)), options={NEW_ROLLOUT_OPTION: True})
-    ends = [cap * (i + 1) // (envs + 1) for i in range(envs - 1)]
+    ends = episode_ends(envs, cap)[:-1]  # the last one runs to the cap
     actions = np.random.default_rng(seed).uniform(-0.3, 0.3, (cap, envs, 7)).astype(np.float32)
     start = time.perf_counter()
     for step, action in enumerate(actions, start=1):
@@ -59,8 +64,7 @@ def batch_seconds(frozen: bool, envs: int, cap: int, seed: int) -> float:
 
 def floor_seconds(envs: int, cap: int, seed: int) -> float:
     """The steps of the counted episodes alone: each episode's steps up to its end, one environment at a time."""
-    ends = [cap * (i + 1) // (envs + 1) for i in range(envs - 1)] + [cap]
-    return sum(batch_seconds(True, 1, end, seed + i) for i, end in enumerate(ends))
+    return sum(batch_seconds(True, 1, end, seed + i) for i, end in enumerate(episode_ends(envs, cap)))
 
 
 # One lerobot-eval in this process: argv[1] "frozen" or "simulated", argv[2] the .npz for the actions and ends, the
