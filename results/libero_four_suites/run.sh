@@ -8,21 +8,13 @@
 # evaluations task by task). No step and no part of one (`predvla sweep --stop-at`) is started after STOP_AT (any date
 # that `date -d` reads, e.g. "01:00 tomorrow"), if given; progress in runs/logs/chains/four_suites.progress.
 set -u
-stop=""; [ -n "${STOP_AT:-}" ] && { stop=$(date -d "$STOP_AT" +%s) || { echo "STOP_AT: not a date: $STOP_AT" >&2; exit 2; }; }
-export MUJOCO_GL=egl OMP_NUM_THREADS=1 OPENBLAS_CORETYPE=SkylakeX
+source results/chain.sh
 SWEEP=configs/sweeps/libero_four_suites.yaml
 R=results/libero_four_suites/runs
-LOG=$R/logs/chains/four_suites.progress
-mkdir -p $R/logs/chains
-step() {  # step NAME SWEEP_FLAGS...: one sweep call; the chain ends at the first that fails
-  local name=$1 rc; shift
-  if [ -n "$stop" ] && [ "$(date +%s)" -ge "$stop" ]; then echo "$(date -u) stop: $name not started" >> $LOG; exit 0; fi
-  echo "$(date -u) start $name" >> $LOG
-  predvla sweep $SWEEP --runs-dir $R "$@" ${stop:+--stop-at "$(date -d "@$stop" -Iminutes)"} \
-    >> $R/logs/chains/four_suites.$name.log 2>&1
-  rc=$?
-  echo "$(date -u) end $name rc=$rc" >> $LOG
-  [ $rc -eq 0 ] || exit $rc
+chain_prefix=$R/logs/chains/four_suites
+step() {  # step NAME SWEEP_FLAGS...
+  local name=$1; shift
+  chain_step $name $SWEEP --runs-dir $R "$@"
 }
 step data --data-only
 for suite in libero_goal libero_spatial libero_10 libero_object; do

@@ -5,12 +5,11 @@
 # every set resumes task by task. Run from the repository root (or a worktree) after `make libero`; a set is not
 # started after STOP_AT (any date that `date -d` reads, e.g. "01:00 tomorrow"), if given.
 set -u
-stop=""; [ -n "${STOP_AT:-}" ] && { stop=$(date -d "$STOP_AT" +%s) || { echo "STOP_AT: not a date: $STOP_AT" >&2; exit 2; }; }
+source results/chain.sh
 o=results/demonstrations/blind_replay_full
-export MUJOCO_GL=egl OMP_NUM_THREADS=1 OPENBLAS_CORETYPE=SkylakeX
 replay() {  # replay SET STYLE [flags]
   local set=$1 style=$2; shift 2
-  if [ -n "$stop" ] && [ "$(date +%s)" -ge "$stop" ]; then echo "$(date -u) stop: ${set}_$style"; exit 0; fi
+  chain_stopped ${set}_$style && exit 0
   local b=(predvla blind-replay --suites libero_object --tasks 0-9 --style "$style")
   [ "$style" = teleop ] && b+=(--diversity 1)
   echo "$(date -u) start ${set}_$style"

@@ -1,31 +1,20 @@
 #!/bin/bash
 # D2 at full scale (configs/sweeps/libero_object_demos_teleop_full.yaml), the order of the chain that trained it
 # (runs/logs/chains/d2full_chain.sh): fit_sensory_olt's nine evaluation cells, the target sets first (E3 shifted, E2
-# randomised resets, E1 official states; exact open loop before error regression in each), then BC-RNN's training
-# (the sweep's data stage first makes D2 where outputs/ lacks it) and its three cells. fit_sensory_olt's model is
-# committed and its training record is in runs/train, so its cells run on any machine after `make libero`. Run from
-# the root of a worktree at a fixed commit; every step resumes where a kill left it (evaluations task by task,
-# training from its last 1,000-step checkpoint). No step and no part of one (`predvla sweep --stop-at`) is started
-# after STOP_AT (any date that `date -d` reads, e.g. "01:00 tomorrow"), if given.
+# randomised resets, E1 official states; exact open loop before error regression in each), then BC-RNN's training (the
+# sweep's data stage first makes D2 where outputs/ lacks it) and its three cells. fit_sensory_olt's model is committed
+# and its training record is in runs/train, so its cells run on any machine after `make libero`. Run from the root of
+# a worktree at a fixed commit; every step resumes where a kill left it (evaluations task by task, training from its
+# last 1,000-step checkpoint), and the chain ends at the first step that fails. No step and no part of one (`predvla
+# sweep --stop-at`) is started after STOP_AT (any date that `date -d` reads, e.g. "01:00 tomorrow"), if given.
 set -u
 source results/chain.sh
-export MUJOCO_GL=egl OMP_NUM_THREADS=1 OPENBLAS_CORETYPE=SkylakeX
 SWEEP=configs/sweeps/libero_object_demos_teleop_full.yaml
 R=results/demonstrations/teleop_full/runs
-LOG=$R/logs/chains/d2full_chain.progress
-mkdir -p $R/logs/chains
-step() {  # step CONFIG SWEEP_FLAGS...: one sweep call; the chain ends at the first that fails
-  local c=$1 rc; shift
-  chain_stopped $c >> $LOG && exit 0
-  echo "$(date -u) start $c $*" >> $LOG
-  predvla sweep $SWEEP --runs-dir $R --configs $c "$@" "${chain_stop_at[@]}" >> $R/logs/chains/d2full_chain.$c.log 2>&1
-  rc=$?
-  echo "$(date -u) end $c rc=$rc" >> $LOG
-  [ $rc -eq 0 ] || exit $rc
-}
+chain_prefix=$R/logs/chains/d2full_chain
 for c in olt_open_loop_shifted olt_carried_shifted olt_shifted olt_open_loop_resets olt_carried_resets olt_resets \
     olt_open_loop olt_carried olt; do
-  step $c --eval-workers 2
+  chain_step $c $SWEEP --runs-dir $R --configs $c --eval-workers 2
 done
-step B2 --train-only
-for c in B2_shifted B2_resets B2; do step $c --eval-workers 2; done
+chain_step B2 $SWEEP --runs-dir $R --configs B2 --train-only
+for c in B2_shifted B2_resets B2; do chain_step $c $SWEEP --runs-dir $R --configs $c --eval-workers 2; done
