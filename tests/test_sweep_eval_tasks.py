@@ -2,11 +2,13 @@
 evaluates them and adds them to the record instead of skipping the run (fake lerobot-train / lerobot-eval)."""
 
 import json
+import signal
 
 from sweep_factory import FakeLeRobot, arg, cli_flags, sweep_file
 
 from lerobot_predvla.cli.sweep import apply_flags
 from lerobot_predvla.sweep import Run, Runner, Sweep
+from lerobot_predvla.sweep.workspace import describe_exit
 
 RUN = Run("predvla", "libero_object", 0)
 
@@ -86,3 +88,27 @@ def test_a_whole_suite_call_evaluates_a_run_recorded_task_by_task(tmp_path):
     again = FakeLeRobot()
     runner.execute = again
     assert runner.run(configs=["predvla"], progress=False)["skipped"] == [RUN.key] and again.commands == []
+
+
+class IllegalInstruction(FakeLeRobot):
+    """A FakeLeRobot whose lerobot-eval dies on an illegal instruction (as under kernels the processor lacks)."""
+
+    def __call__(self, command: list[str], log) -> int:
+        if any(c.endswith("lerobot-eval") for c in command):
+            self.commands.append(command)
+            return -signal.SIGILL
+        return super().__call__(command, log)
+
+
+def test_an_evaluation_ended_by_a_signal_is_reported_with_its_name_and_usual_cause(tmp_path, capsys):
+    runner = runner_for(tmp_path, IllegalInstruction())
+    assert runner.run(configs=["predvla"], progress=False)["failed"] == [RUN.key]
+    err = capsys.readouterr().err
+    assert "failed (killed by SIGILL: an instruction this processor lacks" in err and "OPENBLAS_CORETYPE" in err
+
+
+def test_exit_codes_in_words():
+    assert describe_exit(2) == "exit 2"
+    assert describe_exit(-signal.SIGKILL).startswith("killed by SIGKILL: killed from outside")
+    assert describe_exit(-signal.SIGTERM) == "killed by SIGTERM"
+    assert describe_exit(-999) == "exit -999"

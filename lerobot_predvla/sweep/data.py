@@ -17,7 +17,7 @@ from lerobot_predvla.sims.libero.env import num_tasks, task_spec
 from lerobot_predvla.sims.libero.hdf5_layout import task_file
 from lerobot_predvla.sweep.data_spec import DataSpec, fitted_suites
 from lerobot_predvla.sweep.layout import data_stages_path
-from lerobot_predvla.sweep.workspace import Workspace
+from lerobot_predvla.sweep.workspace import Workspace, describe_exit
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.versions import openblas_coretype
 
@@ -188,7 +188,7 @@ class DataStages(Workspace):
             failed = [(stage, code) for stage, _, code, _ in finished if code != 0]
             for stage, code in failed:
                 print(
-                    f"predvla sweep: data stage {stage} of {suite} failed (exit {code}); see "
+                    f"predvla sweep: data stage {stage} of {suite} failed ({describe_exit(code)}); see "
                     f"{self.log_path('data', suite, 0, stage)}",
                     file=sys.stderr,
                 )

@@ -25,7 +25,7 @@ from lerobot_predvla.sweep.eval_info import (
 )
 from lerobot_predvla.sweep.layout import EVAL_WALL_FILE
 from lerobot_predvla.sweep.spec import ConfigSpec, Run, SweepError
-from lerobot_predvla.sweep.workspace import Workspace
+from lerobot_predvla.sweep.workspace import Workspace, describe_exit
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.manifest import sha256_file
 from lerobot_predvla.utils.statistics import episode_totals, percent
@@ -120,7 +120,10 @@ class Evaluation(Workspace):
         start = time.monotonic()
         code = self.execute(command, log)
         if code != 0 or not (out / EVAL_INFO_FILE).is_file():
-            print(f"predvla sweep: evaluation {run.key} ({out.name}) failed (exit {code}); see {log}", file=sys.stderr)
+            print(
+                f"predvla sweep: evaluation {run.key} ({out.name}) failed ({describe_exit(code)}); see {log}",
+                file=sys.stderr,
+            )
             return False
         atomic_write_json(out / EVAL_WALL_FILE, {"eval_wall_s": round(time.monotonic() - start, 1)})
         return True

@@ -28,6 +28,7 @@ from lerobot_predvla.sweep.lr_selection import (
     selection_path,
 )
 from lerobot_predvla.sweep.spec import ConfigSpec, SweepError
+from lerobot_predvla.sweep.workspace import describe_exit
 from lerobot_predvla.utils.checkpoints import last_pretrained, prune_checkpoints
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.parameters import count_parameters
@@ -123,7 +124,7 @@ class Training(DataStages):
         code = self.execute(command, self.log_path(spec.name, suite, seed, "train"))
         if code != 0 or not (last / "model.safetensors").is_file():
             print(
-                f"predvla sweep: training {spec.name}/{suite}/seed{seed} failed (exit {code}); see "
+                f"predvla sweep: training {spec.name}/{suite}/seed{seed} failed ({describe_exit(code)}); see "
                 f"{self.log_path(spec.name, suite, seed, 'train')}",
                 file=sys.stderr,
             )
@@ -177,7 +178,8 @@ class Training(DataStages):
         code = self.execute(command, log)
         if code != 0 or not (dest / "model.safetensors").is_file():
             print(
-                f"predvla sweep: publishing {spec.name}/{suite}/seed{seed} to {dest} failed (exit {code}); see {log}",
+                f"predvla sweep: publishing {spec.name}/{suite}/seed{seed} to {dest} failed "
+                f"({describe_exit(code)}); see {log}",
                 file=sys.stderr,
             )
             return False

@@ -1,6 +1,7 @@
 """A sweep and its RUNS_DIR: the paths of its runs, the programs it runs and how it runs them. The runner's stages
 (data, training, evaluation) build on it."""
 
+import signal
 import subprocess
 import sys
 from collections.abc import Callable
@@ -20,6 +21,27 @@ from lerobot_predvla.sweep.logs import compact_log
 from lerobot_predvla.sweep.spec import Run, Sweep
 
 Executor = Callable[[list[str], Path], int]  # (command, log file) -> exit code
+
+
+# What a signal that ends a stage usually means here, for the failure message.
+SIGNAL_CAUSES = {
+    signal.SIGILL: "an instruction this processor lacks, e.g. OPENBLAS_CORETYPE naming kernels it cannot run",
+    signal.SIGKILL: "killed from outside, often by the kernel when memory runs out",
+    signal.SIGSEGV: "a crash in native code",
+}
+
+
+def describe_exit(code: int) -> str:
+    """A process's exit code in words: "exit 2", or for a negative code the signal that ended it and its usual
+    cause ("killed by SIGILL: an instruction this processor lacks, ...")."""
+    if code >= 0:
+        return f"exit {code}"
+    try:
+        sig = signal.Signals(-code)
+    except ValueError:
+        return f"exit {code}"
+    cause = SIGNAL_CAUSES.get(sig)
+    return f"killed by {sig.name}" + (f": {cause}" if cause else "")
 
 
 class SweepStopped(Exception):
