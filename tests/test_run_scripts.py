@@ -9,10 +9,12 @@ import subprocess
 from pathlib import Path
 
 import pytest
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPTS = {  # script -> number of `predvla` calls of a whole run
     "results/demonstrations/teleop_full/run.sh": 13,
+    "results/demonstrations/teleop_placed_full/run.sh": 19,
     "results/demonstrations/scripted_full/run.sh": 16,
     "results/libero_four_suites/run.sh": 34,
     "results/demonstrations/blind_replay_full/run.sh": 7,
@@ -79,3 +81,15 @@ def test_the_chain_ends_at_the_first_step_that_fails(tmp_path, script):
     assert len(calls) == 1
     progress = next((tmp_path / "repo/results").rglob("*.progress")).read_text()
     assert progress.splitlines()[-1].endswith("rc=3")
+
+
+@pytest.mark.parametrize("script", SWEEP_SCRIPTS)
+def test_every_config_and_suite_a_script_names_is_in_its_sweep_file(tmp_path, script):
+    _, calls = run_script(tmp_path, script)
+    for call in calls:
+        args = call.split()[2:]  # after "$MUJOCO_GL sweep"
+        sweep = yaml.safe_load((REPO / args[0]).read_text())
+        names = {c["name"] for c in sweep["configs"]}
+        for flag, known in (("--configs", names), ("--suites", set(sweep["suites"]))):
+            if flag in args:
+                assert set(args[args.index(flag) + 1].split(",")) <= known, (script, call)
