@@ -162,11 +162,9 @@ def write_eval_info(path: Path, successes: dict[int, list[bool]]) -> None:
         {"task_group": "libero_object", "task_id": t, "metrics": {"successes": s}} for t, s in successes.items()]})
 
 
-def test_compared_runs_are_paired_episode_by_episode(tmp_path):
-    """Discordant episode pairs and the exact sign test, over the seeds whose runs share their starts."""
-    from lerobot_predvla.report import sign_test
-
-    runs = tmp_path / "runs"
+def write_paired_runs(runs: Path) -> None:
+    """Runs `er` and `ol` (compare_to er) of seeds 0-2, tasks 0 and 1, 4 episodes each; seed 2's `ol` started
+    from other starts."""
     outcomes = {  # (config, seed) -> per task, per episode
         ("er", 0): {0: [True, True, False, True], 1: [True, False, True, True]},
         ("ol", 0): {0: [True, False, False, False], 1: [False, False, True, True]},
@@ -185,6 +183,14 @@ def test_compared_runs_are_paired_episode_by_episode(tmp_path):
             "compare_to": None if config == "er" else "er", "eval_seed": 1000 if (config, seed) == ("ol", 2) else 0,
             "init_states": True, "n_episodes_per_task": 4, "episode_length": 280,
             "tasks": {str(t): {"successes": sum(s), "episodes": len(s)} for t, s in tasks.items()}})
+
+
+def test_compared_runs_are_paired_episode_by_episode(tmp_path):
+    """Discordant episode pairs and the exact sign test, over the seeds whose runs share their starts."""
+    from lerobot_predvla.report import sign_test
+
+    runs = tmp_path / "runs"
+    write_paired_runs(runs)
     summary = write_report(runs, tmp_path / "report")
     pairs = summary["configs"]["ol"]["episodes"]["libero_object"]
     # seed 0: ol 3 successes, er 6; only ol 0, only er 3 (two on task 0, one on task 1).
@@ -199,6 +205,33 @@ def test_compared_runs_are_paired_episode_by_episode(tmp_path):
     assert sign_test(5, 1) == pytest.approx(2 * 7 / 64) and sign_test(10, 0) == pytest.approx(2 / 1024)
     text = (tmp_path / "report" / "report.md").read_text()
     assert "## Paired episodes" in text and "| ol | er | object | 0, 1 | 16 | 7 / 10 | 1 / 4 | 0.375 |" in text
+
+
+def test_tasks_apart_count_their_pairs_and_the_other_tasks_pairs_separately(tmp_path, capsys):
+    """`--tasks-apart 1`: the pairs of task 1 and of the other tasks (task 0), each with its own sign test, beside
+    the pooled count, which is unchanged."""
+    runs = tmp_path / "runs"
+    write_paired_runs(runs)
+    pooled = write_report(runs, tmp_path / "pooled")["configs"]["ol"]["episodes"]["libero_object"]
+    summary = write_report(runs, tmp_path / "report", tasks_apart=[1])
+    pairs = summary["configs"]["ol"]["episodes"]["libero_object"]
+    assert summary["tasks_apart"] == [1] and pairs.pop("apart") == {
+        "tasks": {"pairs": 8, "successes": 3, "against_successes": 3, "only": 1, "only_against": 1,
+                  "sign_test_p": 1.0},
+        "other": {"pairs": 8, "successes": 4, "against_successes": 7, "only": 0, "only_against": 3,
+                  "sign_test_p": pytest.approx(0.25)}}
+    assert pairs == pooled
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## Paired episodes, tasks apart" in text
+    assert "| ol | er | object | tasks 1 | 8 | 3 / 3 | 1 / 1 | 1 |" in text
+    assert "| ol | er | object | the other tasks | 8 | 4 / 7 | 0 / 3 | 0.25 |" in text
+    assert "tasks apart" not in (tmp_path / "pooled" / "report.md").read_text()
+    assert predvla_main(["report", str(runs), "--out", str(tmp_path / "cli"), "--tasks-apart", "1"]) == 0
+    assert json.loads((tmp_path / "cli" / "report.json").read_text())["tasks_apart"] == [1]
+    for bad in ("1,x", "-1"):
+        with pytest.raises(SystemExit):
+            predvla_main(["report", str(runs), "--out", str(tmp_path / "bad"), "--tasks-apart", bad])
+    assert "--tasks-apart expects task ids of 0 or more; got '-1'" in capsys.readouterr().err
 
 
 def test_the_per_task_ablation_figure_compares_the_same_episodes(tmp_path):

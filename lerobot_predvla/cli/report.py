@@ -23,6 +23,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--blind-replay", type=Path, nargs="+", default=[], metavar="DIR",
                         help="Reports of `predvla blind-replay`, one object shift each: one plan replayed blind as a "
                              "reference row and dashed line of the robustness table and figure.")
+    parser.add_argument("--tasks-apart", type=_task_ids, default=None, metavar="IDS",
+                        help="Comma-separated task ids (e.g. 2,3,6, the tasks a screen chose settings on): the paired "
+                             "episodes are also counted on these tasks and on the other tasks apart.")
     parser.add_argument("--docs", action="store_true",
                         help=f"Rewrite the headline block of {README} and {RESULTS_DOC} from results/*/report.json "
                              "and the configs and model cards of every checkpoint under checkpoints/ (no RUNS_DIR).")
@@ -33,6 +36,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
+def _task_ids(value: str) -> list[int]:
+    try:
+        ids = [int(v) for v in value.split(",")]
+    except ValueError:
+        message = f"--tasks-apart expects comma-separated task ids such as 2,3,6; got {value!r}"
+        raise argparse.ArgumentTypeError(message) from None
+    if any(i < 0 for i in ids):
+        raise argparse.ArgumentTypeError(f"--tasks-apart expects task ids of 0 or more; got {value!r}")
+    return ids
+
+
 def run(args: argparse.Namespace) -> int:
     if args.docs == (args.runs_dir is not None) or (not args.docs and args.out is None):
         print("predvla report: error: give RUNS_DIR --out REPORT_DIR, or --docs.", file=sys.stderr)
@@ -40,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.docs:
             return _docs(args)
-        summary = write_report(args.runs_dir, args.out, args.blind_replay)
+        summary = write_report(args.runs_dir, args.out, args.blind_replay, args.tasks_apart)
     except ReportError as err:
         print(f"predvla report: error: {err}", file=sys.stderr)
         return 2

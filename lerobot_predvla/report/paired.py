@@ -115,6 +115,21 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
             }
 
 
+def pairs_apart(summary: dict, tasks_apart: list[int]) -> None:
+    """Add `apart` to every paired entry of `paired_episodes` (per suite): its counts and sign test over the tasks
+    `tasks_apart` and over the other tasks, each where it has pairs; `summary["tasks_apart"]` names them. For tasks
+    a setting was chosen on (a screen's), reported apart from those it was not (the protocols' rule)."""
+    named = {str(t) for t in tasks_apart}
+    summary["tasks_apart"] = sorted(tasks_apart)
+    for entry in summary["configs"].values():
+        for paired in entry.get("episodes", {}).values():
+            groups = {
+                group: [counts for task, counts in paired["tasks"].items() if (task in named) == inside]
+                for group, inside in (("tasks", True), ("other", False))
+            }
+            paired["apart"] = {group: with_sign_test(sum_counts(parts)) for group, parts in groups.items() if parts}
+
+
 def paired_task_rates(summary: dict, config: str, reference: str, suite: str) -> dict[str, tuple[float, float]] | None:
     """Per task, (reference's success, config's change) in % over the episodes both ran from the same starts
     (`paired_episodes`); None when the two have no paired episodes in the suite."""

@@ -251,6 +251,37 @@ def episodes_table(summary: dict) -> str | None:
     return "\n\n".join(parts + notes)
 
 
+def apart_table(summary: dict) -> str | None:
+    """The paired episodes of every `compare_to` pair, on the tasks of `--tasks-apart` and on the other tasks
+    (`pairs_apart`); None without `--tasks-apart`."""
+    if "tasks_apart" not in summary:
+        return None
+    named = ", ".join(map(str, summary["tasks_apart"]))
+    rows = [
+        [
+            name,
+            e["against"],
+            SUITE_LABELS[suite],
+            f"tasks {named}" if group == "tasks" else "the other tasks",
+            str(g["pairs"]),
+            f"{g['successes']} / {g['against_successes']}",
+            f"{g['only']} / {g['only_against']}",
+            f"{g['sign_test_p']:.3g}",
+        ]
+        for name, entry in summary["configs"].items()
+        for suite in summary["suites"]
+        if (e := entry.get("episodes", {}).get(suite))
+        for group, g in e["apart"].items()
+    ]
+    if not rows:
+        return None
+    return table(
+        ["Model", "against", "suite", "tasks", "episode pairs", "successes (model / against)",
+         "only model / only against", "sign test p"],
+        rows,
+    )
+
+
 def task_table(results: Results, suite: str) -> str | None:
     """Success per task (mean over seeds, %) of every configuration evaluated on `suite`."""
     names = [n for n in results.configs if results.tasks.get(n, {}).get(suite)]

@@ -12,7 +12,7 @@ from lerobot_predvla.report.figures import (
     task_figure,
 )
 from lerobot_predvla.report.formatting import MISSING
-from lerobot_predvla.report.paired import paired_episodes
+from lerobot_predvla.report.paired import paired_episodes, pairs_apart
 from lerobot_predvla.report.results import SUMMARY_FILE, Results, load_plan, load_records
 from lerobot_predvla.report.robustness import (
     ROBUSTNESS_FIGURE,
@@ -32,6 +32,7 @@ from lerobot_predvla.report.sections import (
 from lerobot_predvla.report.summary import summarize
 from lerobot_predvla.report.tables import (
     ablation_table,
+    apart_table,
     baseline_table,
     corruption_table,
     episodes_table,
@@ -46,9 +47,12 @@ from lerobot_predvla.utils.io import atomic_write_json, atomic_write_text
 REPORT_FILE = "report.md"
 
 
-def write_report(runs_dir: Path, out: Path, blind_replays: list[Path] = ()) -> dict:
+def write_report(
+    runs_dir: Path, out: Path, blind_replays: list[Path] = (), tasks_apart: list[int] | None = None
+) -> dict:
     """Build tables, figures, `report.md` and `report.json` in `out`; returns the summary. `blind_replays`: reports
-    of `predvla blind-replay` (one object shift each) drawn beside the robustness runs."""
+    of `predvla blind-replay` (one object shift each) drawn beside the robustness runs. `tasks_apart`: task ids whose
+    paired episodes are also counted apart from the other tasks' (e.g. the tasks a screen chose settings on)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -60,6 +64,8 @@ def write_report(runs_dir: Path, out: Path, blind_replays: list[Path] = ()) -> d
         summary["blind_replay"] = {suite: [[cm, successes, episodes] for cm, successes, episodes in points]
                                    for suite, points in blind.items()}
     paired_episodes(summary, records, Path(runs_dir))
+    if tasks_apart:
+        pairs_apart(summary, tasks_apart)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     made = {
@@ -122,6 +128,13 @@ def write_report(runs_dir: Path, out: Path, blind_replays: list[Path] = ()) -> d
             None,
             "Each episode against the same start of the compared run (same evaluation seed, resets and protocol); "
             "sign test: exact, two-sided, on the episodes that succeed in only one.",
+        ),
+        (
+            "Paired episodes, tasks apart",
+            apart_table(summary),
+            None,
+            "The pairs above counted on the tasks named by `--tasks-apart` and on the other tasks separately, each "
+            "with its own sign test.",
         ),
         (
             "Robustness: shifted objects and LIBERO-PRO / LIBERO-plus variants",
