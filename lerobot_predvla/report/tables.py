@@ -197,6 +197,19 @@ def corruption_table(summary: dict) -> str | None:
     return table(["", "channel", "α", *[SUITE_LABELS[s] for s in suites]], rows)
 
 
+PAIR_HEADERS = ["episode pairs", "successes (model / against)", "only model / only against", "sign test p"]
+
+
+def pair_cells(counts: dict) -> list[str]:
+    """The PAIR_HEADERS cells of a set of episode pairs (`with_sign_test`)."""
+    return [
+        str(counts["pairs"]),
+        f"{counts['successes']} / {counts['against_successes']}",
+        f"{counts['only']} / {counts['only_against']}",
+        f"{counts['sign_test_p']:.3g}",
+    ]
+
+
 def episodes_table(summary: dict) -> str | None:
     """Paired episodes of every `compare_to` pair, then of every pool over its seeds (`pool_with`) or evaluation
     sets (`pool_sets`) together."""
@@ -212,10 +225,7 @@ def episodes_table(summary: dict) -> str | None:
             e["against"],
             SUITE_LABELS[suite],
             ", ".join(map(str, e["seeds"])),
-            str(e["pairs"]),
-            f"{e['successes']} / {e['against_successes']}",
-            f"{e['only']} / {e['only_against']}",
-            f"{e['sign_test_p']:.3g}",
+            *pair_cells(e),
         ]
         for name, entry in entries
         for suite in summary["suites"]
@@ -232,16 +242,7 @@ def episodes_table(summary: dict) -> str | None:
     parts = (
         [
             table(
-                [
-                    "Model",
-                    "against",
-                    "suite",
-                    "seeds",
-                    "episode pairs",
-                    "successes (model / against)",
-                    "only model / only against",
-                    "sign test p",
-                ],
+                ["Model", "against", "suite", "seeds", *PAIR_HEADERS],
                 rows,
             )
         ]
@@ -263,10 +264,7 @@ def apart_table(summary: dict) -> str | None:
             e["against"],
             SUITE_LABELS[suite],
             f"tasks {named}" if group == "tasks" else "the other tasks",
-            str(g["pairs"]),
-            f"{g['successes']} / {g['against_successes']}",
-            f"{g['only']} / {g['only_against']}",
-            f"{g['sign_test_p']:.3g}",
+            *pair_cells(g),
         ]
         for name, entry in summary["configs"].items()
         for suite in summary["suites"]
@@ -276,8 +274,7 @@ def apart_table(summary: dict) -> str | None:
     if not rows:
         return None
     return table(
-        ["Model", "against", "suite", "tasks", "episode pairs", "successes (model / against)",
-         "only model / only against", "sign test p"],
+        ["Model", "against", "suite", "tasks", *PAIR_HEADERS],
         rows,
     )
 
