@@ -8,6 +8,7 @@ from sweep_factory import FakeLeRobot, arg, cli_flags, sweep_file
 
 from lerobot_predvla.cli.sweep import apply_flags
 from lerobot_predvla.sweep import Run, Runner, Sweep
+from lerobot_predvla.sweep.layout import EVAL_WALL_FILE
 from lerobot_predvla.sweep.workspace import describe_exit
 
 RUN = Run("predvla", "libero_object", 0)
@@ -60,6 +61,23 @@ def test_a_later_call_for_other_tasks_evaluates_them_and_extends_the_record(tmp_
     extended = json.loads(runner.record_path(RUN).read_text())
     assert extended["eval_tasks"] == [0, 1, 2, 3, 4] and extended["episodes"] == 20
     assert len(extended["commands"]["eval"]) == 5
+
+
+def test_the_record_names_the_machine_of_each_part_and_keeps_those_of_earlier_calls(tmp_path):
+    """A run resumed on another machine: each part's file names where it ran, and the record keeps every part's."""
+    runner_for(tmp_path, FakeLeRobot()).run(configs=["predvla"], progress=False)
+    runner = runner_for(tmp_path, FakeLeRobot())
+    first = json.loads(runner.record_path(RUN).read_text())["part_machines"]
+    assert set(first) == {"0", "1"} and all("logical CPUs" in m and "; OpenBLAS " in m for m in first.values())
+    part = tmp_path / "runs/eval/predvla/libero_object/seed0/task0" / EVAL_WALL_FILE
+    assert json.loads(part.read_text())["machine"] == first["0"]
+    record = json.loads(runner.record_path(RUN).read_text())
+    record["part_machines"]["0"] = "elsewhere"
+    runner.record_path(RUN).write_text(json.dumps(record))
+    later = runner_for(tmp_path, FakeLeRobot(), eval_tasks=[4])
+    later.run(configs=["predvla"], progress=False)
+    machines = json.loads(later.record_path(RUN).read_text())["part_machines"]
+    assert machines == {"0": "elsewhere", "1": first["1"], "4": first["1"]}
 
 
 def test_tasks_of_another_protocol_do_not_join_a_record(tmp_path, capsys):

@@ -29,7 +29,19 @@ from lerobot_predvla.sweep.workspace import Workspace, describe_exit
 from lerobot_predvla.utils.io import atomic_write_json
 from lerobot_predvla.utils.manifest import sha256_file
 from lerobot_predvla.utils.statistics import episode_totals, percent
-from lerobot_predvla.utils.versions import run_versions
+from lerobot_predvla.utils.versions import machine, openblas_coretype, run_versions
+
+
+def part_machine() -> str:
+    """The machine an evaluation part runs on and numpy's OpenBLAS kernels (the simulator's controller rounds by
+    them): "AMD EPYC, 2 logical CPUs, AVX-512 bf16: no; OpenBLAS Haswell"."""
+    return f"{machine()}; OpenBLAS {openblas_coretype()}"
+
+
+def recorded_machine(out: Path) -> str | None:
+    """The machine an evaluation part's file names (`part_machine`); None for parts written before it named one."""
+    wall_file = out / EVAL_WALL_FILE
+    return json.loads(wall_file.read_text()).get("machine") if wall_file.is_file() else None
 
 
 class Evaluation(Workspace):
@@ -125,7 +137,9 @@ class Evaluation(Workspace):
                 file=sys.stderr,
             )
             return False
-        atomic_write_json(out / EVAL_WALL_FILE, {"eval_wall_s": round(time.monotonic() - start, 1)})
+        # where the part ran: parts of one run may run on different machines (a run resumed elsewhere)
+        atomic_write_json(out / EVAL_WALL_FILE, {"eval_wall_s": round(time.monotonic() - start, 1),
+                                                 "machine": part_machine()})
         return True
 
     def evaluate(self, run: Run, trained: dict) -> bool:
@@ -161,6 +175,8 @@ class Evaluation(Workspace):
         if not all(finished):
             return False
         tasks, walls = self.part_results([out for out, _ in parts])
+        # per part (keyed by its first task, as `walls`), the machine it ran on
+        machines = {task: m for (task, _), (out, _) in zip(walls, parts, strict=True) if (m := recorded_machine(out))}
         unsettled: dict | None = {task: [] for task in tasks}  # task -> its unsettled episodes' indices
         for out, _ in parts:
             unsettled.update(unsettled_episodes(out / EVAL_INFO_FILE))
@@ -181,6 +197,7 @@ class Evaluation(Workspace):
             walls = [("", earlier.get("eval_wall_s") or 0.0), *(walls[i] for i in new)]
             tasks = dict(sorted({**earlier["tasks"], **tasks}.items(), key=lambda kv: int(kv[0])))
             eval_tasks = sorted(int(t) for t in tasks)
+            machines = {**(earlier.get("part_machines") or {}), **machines}
         successes, episodes = episode_totals(tasks.values())
         record = {
             "config": run.config,
@@ -220,6 +237,8 @@ class Evaluation(Workspace):
             "model_sha256": protocol["model_sha256"],
             "commands": {"train": trained["command"], "eval": commands[0] if len(commands) == 1 else commands},
             "versions": run_versions(),
+            # per part (its first task), the machine it ran on, where its part file names one
+            "part_machines": dict(sorted(machines.items(), key=lambda kv: int(kv[0]))),
             "finished": datetime.now(UTC).isoformat(timespec="seconds"),
         }
         atomic_write_json(self.record_path(run), record)
