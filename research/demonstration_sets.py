@@ -22,6 +22,11 @@ from the records' per-task counts and the blind replays' per-task files:
   python -m research.demonstration_sets --runs results/demonstrations/teleop_full/runs \
       --blind results/demonstrations/blind_replay_full --style teleop --apart 2,3,6 \
       --out results/demonstrations/teleop_full/sets
+
+Where a cell's episodes (`runs/eval/<cell>/`) and the blind replay's per-start outcomes (`<set>_<style>/tasks/`) both
+exist, sets.json's `blind_overlap` also counts, per cell and set, the cell's successes on the starts where the
+plan replayed blind succeeds too, beside the number chance would give (the cell's successes times the blind replay's
+rate over the same starts): a policy that succeeds only where a blind replay does has not shown that it looks.
 """
 
 import argparse
@@ -35,7 +40,7 @@ from pathlib import Path
 from lerobot_predvla.cli.demos import task_ids
 from lerobot_predvla.report.formatting import fmt_rate, table
 from lerobot_predvla.report.headline import load_blind_replay
-from lerobot_predvla.report.results import ReportError
+from lerobot_predvla.report.results import ReportError, run_episodes
 from lerobot_predvla.sims.libero import blind_replay
 from lerobot_predvla.utils.io import atomic_save_figure, atomic_write_json, atomic_write_text
 
@@ -105,6 +110,34 @@ def blind_tasks(blind: Path, set_name: str, style: str) -> dict[str, dict] | Non
     return report[SUITE]
 
 
+def blind_episodes(blind: Path, set_name: str, style: str) -> dict[tuple[str, int], bool] | None:
+    """Per (task id, episode index), whether the state-0 plan replayed blind succeeds from that start (on E1 its own
+    start, state 0, included), from the per-task files; None when the set has none."""
+    folder = blind / f"{set_name}_{style}" / blind_replay.TASKS_DIR / SUITE
+    found = {}
+    for path in sorted(folder.glob("task*.json")):
+        task = blind_replay.load_task(path)
+        if task is None:
+            raise ValueError(f"{path}: unreadable per-task result.")
+        plan, task_id = task["plans"]["state0"], str(task["task_id"])
+        found.update({(task_id, int(k)): step is not None for k, step in plan["success_step"].items()})
+        if set_name == "E1":
+            found[(task_id, int(plan["source_state"]))] = plan["source_replay_step"] is not None
+    return found or None
+
+
+def overlap(episodes: dict[tuple[str, int], bool], blind: dict[tuple[str, int], bool]) -> dict | None:
+    """On the starts both ran: the cell's successes, those where the blind replay succeeds too, and the number
+    chance would give; None when they share no start."""
+    keys = episodes.keys() & blind.keys()
+    if not keys:
+        return None
+    successes = sum(episodes[k] for k in keys)
+    blind_rate = sum(blind[k] for k in keys) / len(keys)
+    return {"starts": len(keys), "successes": successes, "with_blind": sum(episodes[k] and blind[k] for k in keys),
+            "by_chance": round(successes * blind_rate, 2)}
+
+
 def blind_total(tasks: dict[str, dict], set_name: str) -> tuple[int, int]:
     """(successes, episodes) of the tasks' plans: on E1 with each plan's replay on its own start (state 0)."""
     return blind_replay.totals_with_source(tasks) if set_name == "E1" else blind_replay.totals(tasks)
@@ -133,6 +166,12 @@ def collect(runs: Path, blind: Path, style: str, apart: list[int] | None = None)
             figures_apart[name] = None if tasks is None else split(tasks, apart, partial(blind_total, set_name=name))
     report = {"style": style, "sets": {name: what for name, _, what in SETS}, "cells": cells,
               "blind_replay": figures}
+    blind_starts = {name: blind_episodes(blind, name, style) for name, _, _ in SETS}
+    overlaps = {label: {name: overlap(run_episodes(runs, prefix + suffix, SUITE, 0), blind_starts[name])
+                        for name, suffix, _ in SETS if blind_starts[name] and cells[label][name]}
+                for prefix, label in POLICIES}
+    if any(overlaps.values()):
+        report["blind_overlap"] = overlaps
     if apart:
         report["apart"] = {"tasks": sorted(apart), "cells": cells_apart, "blind_replay": figures_apart}
     return report
@@ -157,7 +196,17 @@ def markdown(report: dict, command: str) -> str:
         body = [[label, *[split(v) for v in sets.values()]] for label, sets in apart["cells"].items()]
         body.append([reference, *[split(v) for v in apart["blind_replay"].values()]])
         lines += [f"The same cells on tasks {listed} / on the other tasks:", "", table(header, body), ""]
+    if overlaps := report.get("blind_overlap"):
+        body = [[label, *[overlap_text(sets.get(name)) for name in report["sets"]]] for label, sets in overlaps.items()
+                if any(sets.values())]
+        lines += ["Each cell's successes on the starts where the plan replayed blind succeeds too, of its successes "
+                  "(by chance: its successes times the blind replay's rate on the same starts):", "",
+                  table(header, body), ""]
     return "\n".join([*lines, "Reproduce:", "", "```bash", command, "```", ""])
+
+
+def overlap_text(value: dict | None) -> str:
+    return f"{value['with_blind']} of {value['successes']} (by chance {value['by_chance']:.1f})" if value else "-"
 
 
 def figure(report: dict, path: Path) -> None:

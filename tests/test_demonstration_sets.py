@@ -88,3 +88,30 @@ def test_apart_splits_every_cell_and_blind_figure_into_the_listed_tasks_and_the_
     assert ds.main([*args, "--apart", "2,3"]) == 2
     assert "B1_shifted/libero_object/seed0.json: no per-task counts" in capsys.readouterr().err
     assert ds.main(args) == 0 and "apart" not in json.loads((out / "sets.json").read_text())
+
+
+def test_successes_on_starts_where_the_blind_replay_succeeds_too_beside_chance(tmp_path, capsys):
+    """Per cell and set, from the cell's episodes and the blind replay's per-start outcomes: on E3, 3 successes of
+    which 2 on starts where the blind plan succeeds (2 of 4 starts: chance 1.5); on E1 the plan's own start counts."""
+    runs, blind, out = tmp_path / "runs", tmp_path / "blind", tmp_path / "out"
+    cells = {"olt_carried_shifted": {2: [True, True, False, True]}, "olt_carried": {2: [True, False, False, False]}}
+    for config, tasks in cells.items():
+        write_record(runs, config, sum(map(sum, tasks.values())), 4)
+        part = runs / "eval" / config / "libero_object" / "seed0" / "task2"
+        part.mkdir(parents=True)
+        part.joinpath("eval_info.json").write_text(json.dumps({"per_task": [
+            {"task_group": "libero_object", "task_id": t, "metrics": {"successes": s}} for t, s in tasks.items()]}))
+    for folder, steps, source_step in (("E3_teleop", {"0": 150, "1": 151, "2": None, "3": None}, 149),
+                                       ("E1_teleop", {"1": None, "2": None, "3": None}, 149)):
+        write_blind(blind, folder, {"2": {"successes": sum(v is not None for v in steps.values()),
+                                          "episodes": len(steps), "source_replay_success": True}})
+        path = blind / folder / "tasks" / "libero_object" / "task2.json"
+        path.parent.mkdir(parents=True)
+        path.write_text(json.dumps({"task_id": 2, "plans": {"state0": {
+            "success_step": steps, "source_state": 0, "source_replay_step": source_step}}}))
+    assert ds.main(["--runs", str(runs), "--blind", str(blind), "--style", "teleop", "--out", str(out)]) == 0
+    overlap = json.loads((out / "sets.json").read_text())["blind_overlap"]
+    label = "PredVLA fit_sensory_olt, error regression, Adam carried"
+    assert overlap[label]["E3"] == {"starts": 4, "successes": 3, "with_blind": 2, "by_chance": 1.5}
+    assert overlap[label]["E1"] == {"starts": 4, "successes": 1, "with_blind": 1, "by_chance": 0.25}
+    assert "| 1 of 1 (by chance 0.2) | - | - | 2 of 3 (by chance 1.5) |" in (out / "sets.md").read_text()
