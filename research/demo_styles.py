@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from lerobot_predvla.cli.blind_replay import _ints
+from lerobot_predvla.cli.arguments import int_list
 from lerobot_predvla.sims.libero.blind_replay import Settings, plan_replays, task_path
 from lerobot_predvla.sims.libero.env import OFFICIAL_INIT_NOISE, make_env, official_init_states, task_spec
 from lerobot_predvla.sims.libero.expert.teleop import TELEOP, TeleopParams
@@ -243,11 +243,11 @@ COMMITTED_BLIND = Path("results/blind_replay")
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m research.demo_styles", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--tasks", type=_ints("--tasks"), default=[0, 1, 2],
+    p.add_argument("--tasks", type=int_list("--tasks"), default=[0, 1, 2],
                    help="libero_object task ids (default 0-2); the first one's plan is replayed blind")
     p.add_argument("--per-task", type=int, default=10, help="attempts per task and variant (default 10)")
     p.add_argument("--seed", type=int, default=0, help="demonstration seed, as `predvla demos --seed` (default 0)")
-    p.add_argument("--blind-states", type=_ints("--blind-states"), default=list(range(1, 20)),
+    p.add_argument("--blind-states", type=int_list("--blind-states"), default=list(range(1, 20)),
                    help="official init states the teleop plan from state 0 is replayed on (default 1-19)")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT})")
     return p

@@ -231,7 +231,7 @@ def test_tasks_apart_count_their_pairs_and_the_other_tasks_pairs_separately(tmp_
     for bad in ("1,x", "-1"):
         with pytest.raises(SystemExit):
             predvla_main(["report", str(runs), "--out", str(tmp_path / "bad"), "--tasks-apart", bad])
-    assert "--tasks-apart expects task ids of 0 or more; got '-1'" in capsys.readouterr().err
+    assert "--tasks-apart expects integers and ranges such as 1-20 or 0,3,5; got '-1'" in capsys.readouterr().err
 
 
 def test_the_per_task_ablation_figure_compares_the_same_episodes(tmp_path):
@@ -307,6 +307,16 @@ def test_pooled_configurations_gather_their_seeds_and_paired_episodes(tmp_path):
     assert ol["mean"] == pytest.approx(np.mean([37.5, 75.0, 75.0]))
     assert f"|  | ol, pooled seeds (ol + ol_seeds) | {ol['mean']:.2f} ± {ol['std']:.2f} |" in ablations
     assert "| ol + ol_seeds | er + er_seeds | object | 0, 1, 2 | 16 | 9 / 11 | 2 / 4 | 0.688 |" in text
+    # `--tasks-apart 1`: the pool's pairs of task 1 (seed 0: 2 / 3, only er 1; seed 1: 1 / 0, only ol 1; seed 2:
+    # 2 / 2) and of task 0 (the rest), each summed over the pooled configurations.
+    apart = write_report(runs, tmp_path / "apart", tasks_apart=[1])["pooled"]["ol"]["episodes"]["libero_object"]
+    assert apart["apart"] == {
+        "tasks": {"pairs": 8, "successes": 5, "against_successes": 5, "only": 1, "only_against": 1,
+                  "sign_test_p": 1.0},
+        "other": {"pairs": 8, "successes": 4, "against_successes": 6, "only": 1, "only_against": 3,
+                  "sign_test_p": pytest.approx(0.625)}}
+    assert "| ol + ol_seeds | er + er_seeds | object | tasks 1 | 8 | 5 / 5 | 1 / 1 | 1 |" in (
+        tmp_path / "apart" / "report.md").read_text()
 
 
 def test_a_seed_in_two_pooled_configurations_is_an_error(tmp_path):

@@ -47,6 +47,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from lerobot_predvla.cli.arguments import int_list
 from lerobot_predvla.cli.demos import add_style_arguments
 from lerobot_predvla.columns import SUITES
 from lerobot_predvla.sims.libero.blind_replay import (
@@ -81,31 +82,6 @@ from lerobot_predvla.utils.io import atomic_write_json
 ALL_OTHERS: tuple[int, ...] = ()  # --cross-task with no ids: every other task of the suite
 
 
-def _ints(flag: str):
-    def parse(text: str) -> list[int]:
-        out = []
-        try:
-            for part in text.split(","):
-                part = part.strip()
-                if not part:
-                    continue
-                if "-" in part:
-                    lo, hi = (int(v) for v in part.split("-", 1))
-                    if hi < lo:
-                        raise ValueError(part)
-                    out.extend(range(lo, hi + 1))
-                else:
-                    out.append(int(part))
-        except ValueError as err:
-            raise argparse.ArgumentTypeError(f"{flag} expects integers and ranges such as 1-20 or 0,3,5; got "
-                                             f"{text!r}") from err
-        if not out:
-            raise argparse.ArgumentTypeError(f"{flag} is empty")
-        return sorted(set(out))
-
-    return parse
-
-
 def _suites(text: str) -> list[str]:
     suites = [s.strip() for s in text.split(",") if s.strip()]
     unknown = [s for s in suites if s not in SUITES]
@@ -119,8 +95,8 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("blind-replay", help="replay one scripted-expert plan per task without observations",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--suites", type=_suites, default=list(SUITES), help="comma-separated (default: all four)")
-    p.add_argument("--tasks", type=_ints("--tasks"), default=None, help="task ids, e.g. 0,2 or 0-4 (default: all)")
-    p.add_argument("--states", type=_ints("--states"), default=None,
+    p.add_argument("--tasks", type=int_list("--tasks"), default=None, help="task ids, e.g. 0,2 or 0-4 (default: all)")
+    p.add_argument("--states", type=int_list("--states"), default=None,
                    help="official init states the plans are replayed on (default 1-20)")
     p.add_argument("--source-state", type=int, default=0,
                    help="official init state the first plan is recorded from (default 0)")
@@ -145,7 +121,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--placement-spread-cm", type=float, default=0.0,
                    help="with --resets-seed: shift every movable object after each reset as lerobot-eval's "
                         "--env.placement_spread_cm does (default 0: none)")
-    p.add_argument("--cross-task", type=_ints("--cross-task"), nargs="?", const=ALL_OTHERS, default=None,
+    p.add_argument("--cross-task", type=int_list("--cross-task"), nargs="?", const=ALL_OTHERS, default=None,
                    metavar="IDS", help="replay each plan on other tasks of the same scene instead of its own: on the "
                    "evaluated task ids IDS, or with no IDS on every other task of the suite")
     p.add_argument("--own-out", type=Path, default=DEFAULT_OUT,

@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from lerobot_predvla.cli.arguments import int_list
 from lerobot_predvla.report import REPORT_FILE, ReportError, write_report
 from lerobot_predvla.report.headline import README, RESULTS_DOC, update_docs
 
@@ -23,8 +24,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--blind-replay", type=Path, nargs="+", default=[], metavar="DIR",
                         help="Reports of `predvla blind-replay`, one object shift each: one plan replayed blind as a "
                              "reference row and dashed line of the robustness table and figure.")
-    parser.add_argument("--tasks-apart", type=_task_ids, default=None, metavar="IDS",
-                        help="Comma-separated task ids (e.g. 2,3,6, the tasks a screen chose settings on): the paired "
+    parser.add_argument("--tasks-apart", type=int_list("--tasks-apart"), default=None, metavar="IDS",
+                        help="Task ids (e.g. 2,3,6 or 0-4; the tasks a screen chose settings on): the paired "
                              "episodes are also counted on these tasks and on the other tasks apart.")
     parser.add_argument("--docs", action="store_true",
                         help=f"Rewrite the headline block of {README} and {RESULTS_DOC} from results/*/report.json "
@@ -34,17 +35,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--root", type=Path, default=Path("."),
                         help="With --docs: the repository root (holding README.md, docs/ and results/).")
     parser.set_defaults(func=run)
-
-
-def _task_ids(value: str) -> list[int]:
-    try:
-        ids = [int(v) for v in value.split(",")]
-    except ValueError:
-        message = f"--tasks-apart expects comma-separated task ids such as 2,3,6; got {value!r}"
-        raise argparse.ArgumentTypeError(message) from None
-    if any(i < 0 for i in ids):
-        raise argparse.ArgumentTypeError(f"--tasks-apart expects task ids of 0 or more; got {value!r}")
-    return ids
 
 
 def run(args: argparse.Namespace) -> int:

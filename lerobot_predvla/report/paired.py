@@ -36,6 +36,7 @@ PAIR_COUNTS = ("pairs", "successes", "against_successes", "only", "only_against"
 
 def sum_counts(parts: Iterable[dict[str, int]]) -> dict[str, int]:
     """PAIR_COUNTS summed over several sets of episode pairs (tasks, or the configurations of a pool)."""
+    parts = list(parts)  # read once per count
     return {count: sum(part[count] for part in parts) for count in PAIR_COUNTS}
 
 
@@ -116,18 +117,37 @@ def paired_episodes(summary: dict, records: list[dict], runs_dir: Path) -> None:
 
 
 def pairs_apart(summary: dict, tasks_apart: list[int]) -> None:
-    """Add `apart` to every paired entry of `paired_episodes` (per suite): its counts and sign test over the tasks
-    `tasks_apart` and over the other tasks, each where it has pairs; `summary["tasks_apart"]` names them. For tasks
-    a setting was chosen on (a screen's), reported apart from those it was not (the protocols' rule)."""
+    """Add `apart` to every paired entry of `paired_episodes` and of its pools (per suite): the counts and sign test
+    over the tasks `tasks_apart` (`tasks`) and over the other tasks (`other`), each where it has pairs;
+    `summary["tasks_apart"]` names them. For tasks a setting was chosen on (a screen's), reported apart from those
+    it was not (the protocols' rule)."""
     named = {str(t) for t in tasks_apart}
-    summary["tasks_apart"] = sorted(tasks_apart)
+    summary["tasks_apart"] = sorted({int(t) for t in tasks_apart})
+    groups = (("tasks", True), ("other", False))
     for entry in summary["configs"].values():
         for paired in entry.get("episodes", {}).values():
-            groups = {
-                group: [counts for task, counts in paired["tasks"].items() if (task in named) == inside]
-                for group, inside in (("tasks", True), ("other", False))
-            }
-            paired["apart"] = {group: with_sign_test(sum_counts(parts)) for group, parts in groups.items() if parts}
+            parts = {g: [c for task, c in paired["tasks"].items() if (task in named) == inside] for g, inside in groups}
+            paired["apart"] = {g: sum_counts(p) for g, p in parts.items() if p}
+    for pool in [*summary.get("pooled", {}).values(), *summary.get("pooled_sets", {}).values()]:
+        for suite, pooled in pool.get("episodes", {}).items():
+            entries = [e for name in pool["configs"] if (e := summary["configs"][name].get("episodes", {}).get(suite))]
+            pooled["apart"] = {g: sum_counts([e["apart"][g] for e in entries if g in e["apart"]]) for g, _ in groups
+                               if any(g in e["apart"] for e in entries)}
+    for _, episodes in paired_entries(summary):
+        for paired in episodes.values():
+            paired["apart"] = {g: with_sign_test(counts) for g, counts in paired["apart"].items()}
+
+
+def paired_entries(summary: dict) -> list[tuple[str, dict]]:
+    """(name, per-suite paired episodes) of every `compare_to` configuration, then of every pool over its seeds
+    (`pool_with`) or evaluation sets (`pool_sets`, named "..., pooled over evaluation sets"): the rows of the
+    paired-episode tables."""
+    return [
+        *((name, entry.get("episodes", {})) for name, entry in summary["configs"].items()),
+        *((" + ".join(pool["configs"]), pool.get("episodes", {})) for pool in summary.get("pooled", {}).values()),
+        *((f"{' + '.join(pool['configs'])}, pooled over evaluation sets", pool.get("episodes", {}))
+          for pool in summary.get("pooled_sets", {}).values()),
+    ]
 
 
 def paired_task_rates(summary: dict, config: str, reference: str, suite: str) -> dict[str, tuple[float, float]] | None:

@@ -5,6 +5,7 @@ paired episodes, corrupted observations and success per task."""
 import numpy as np
 
 from lerobot_predvla.report.formatting import MISSING, fmt_mean_std, fmt_num, fmt_params, table
+from lerobot_predvla.report.paired import paired_entries
 from lerobot_predvla.report.results import Results, task_ids
 from lerobot_predvla.sims.libero.protocol import SHORT_SUITES, SUITE_LABELS
 
@@ -213,23 +214,11 @@ def pair_cells(counts: dict) -> list[str]:
 def episodes_table(summary: dict) -> str | None:
     """Paired episodes of every `compare_to` pair, then of every pool over its seeds (`pool_with`) or evaluation
     sets (`pool_sets`) together."""
-    entries = [
-        *summary["configs"].items(),
-        *((" + ".join(pool["configs"]), pool) for pool in summary.get("pooled", {}).values()),
-        *((f"{' + '.join(pool['configs'])}, pooled over evaluation sets", pool)
-          for pool in summary.get("pooled_sets", {}).values()),
-    ]
     rows = [
-        [
-            name,
-            e["against"],
-            SUITE_LABELS[suite],
-            ", ".join(map(str, e["seeds"])),
-            *pair_cells(e),
-        ]
-        for name, entry in entries
+        [name, e["against"], SUITE_LABELS[suite], ", ".join(map(str, e["seeds"])), *pair_cells(e)]
+        for name, episodes in paired_entries(summary)
         for suite in summary["suites"]
-        if (e := entry.get("episodes", {}).get(suite))
+        if (e := episodes.get(suite))
     ]
     notes = [
         f"Not paired: `{u['config']}` against `{u['against']}`, {SUITE_LABELS[u['suite']]}, seed {u['seed']}: "
@@ -253,22 +242,17 @@ def episodes_table(summary: dict) -> str | None:
 
 
 def apart_table(summary: dict) -> str | None:
-    """The paired episodes of every `compare_to` pair, on the tasks of `--tasks-apart` and on the other tasks
-    (`pairs_apart`); None without `--tasks-apart`."""
+    """The paired episodes of every `compare_to` pair and pool, on the tasks of `--tasks-apart` and on the other
+    tasks (`pairs_apart`); None without `--tasks-apart`."""
     if "tasks_apart" not in summary:
         return None
     named = ", ".join(map(str, summary["tasks_apart"]))
     rows = [
-        [
-            name,
-            e["against"],
-            SUITE_LABELS[suite],
-            f"tasks {named}" if group == "tasks" else "the other tasks",
-            *pair_cells(g),
-        ]
-        for name, entry in summary["configs"].items()
+        [name, e["against"], SUITE_LABELS[suite], f"tasks {named}" if group == "tasks" else "the other tasks",
+         *pair_cells(g)]
+        for name, episodes in paired_entries(summary)
         for suite in summary["suites"]
-        if (e := entry.get("episodes", {}).get(suite))
+        if (e := episodes.get(suite))
         for group, g in e["apart"].items()
     ]
     if not rows:
