@@ -119,10 +119,13 @@ def blind_episodes(blind: Path, set_name: str, style: str) -> dict[tuple[str, in
         task = blind_replay.load_task(path)
         if task is None:
             raise ValueError(f"{path}: unreadable per-task result.")
-        plan, task_id = task["plans"]["state0"], str(task["task_id"])
-        found.update({(task_id, int(k)): step is not None for k, step in plan["success_step"].items()})
-        if set_name == "E1":
-            found[(task_id, int(plan["source_state"]))] = plan["source_replay_step"] is not None
+        try:
+            plan, task_id = task["plans"]["state0"], str(task["task_id"])
+            found.update({(task_id, int(k)): step is not None for k, step in plan["success_step"].items()})
+            if set_name == "E1":
+                found[(task_id, int(plan["source_state"]))] = plan["source_replay_step"] is not None
+        except (KeyError, TypeError, ValueError, AttributeError) as err:
+            raise ValueError(f"{path}: no per-start outcomes of the state-0 plan ({err!r}).") from err
     return found or None
 
 
@@ -145,7 +148,8 @@ def blind_total(tasks: dict[str, dict], set_name: str) -> tuple[int, int]:
 
 def collect(runs: Path, blind: Path, style: str, apart: list[int] | None = None) -> dict:
     """sets.json's content: per policy label and set name, [successes, episodes] or None; with `apart`, the same
-    per group of tasks (`listed`, `others`) under `apart`. Each record and blind replay is read once."""
+    per group of tasks (`listed`, `others`) under `apart`; `blind_overlap` where episodes and per-start blind
+    outcomes exist (`overlap`)."""
     if not (runs / "records").is_dir():
         raise ValueError(f"--runs {runs}: no records/ folder (a `predvla sweep --runs-dir`).")
     cells: dict[str, dict] = {}
@@ -170,8 +174,9 @@ def collect(runs: Path, blind: Path, style: str, apart: list[int] | None = None)
     overlaps = {label: {name: overlap(run_episodes(runs, prefix + suffix, SUITE, 0), blind_starts[name])
                         for name, suffix, _ in SETS if blind_starts[name] and cells[label][name]}
                 for prefix, label in POLICIES}
+    overlaps = {label: {name: o for name, o in sets.items() if o} for label, sets in overlaps.items()}
     if any(overlaps.values()):
-        report["blind_overlap"] = overlaps
+        report["blind_overlap"] = {label: sets for label, sets in overlaps.items() if sets}
     if apart:
         report["apart"] = {"tasks": sorted(apart), "cells": cells_apart, "blind_replay": figures_apart}
     return report
@@ -197,8 +202,7 @@ def markdown(report: dict, command: str) -> str:
         body.append([reference, *[split(v) for v in apart["blind_replay"].values()]])
         lines += [f"The same cells on tasks {listed} / on the other tasks:", "", table(header, body), ""]
     if overlaps := report.get("blind_overlap"):
-        body = [[label, *[overlap_text(sets.get(name)) for name in report["sets"]]] for label, sets in overlaps.items()
-                if any(sets.values())]
+        body = [[label, *[overlap_text(sets.get(name)) for name in report["sets"]]] for label, sets in overlaps.items()]
         lines += ["Each cell's successes on the starts where the plan replayed blind succeeds too, of its successes "
                   "(by chance: its successes times the blind replay's rate on the same starts):", "",
                   table(header, body), ""]

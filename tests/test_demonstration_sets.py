@@ -2,6 +2,7 @@
 hand-made run records and blind-replay reports."""
 
 import json
+import shutil
 
 from research import demonstration_sets as ds
 
@@ -101,7 +102,7 @@ def test_successes_on_starts_where_the_blind_replay_succeeds_too_beside_chance(t
         part.mkdir(parents=True)
         part.joinpath("eval_info.json").write_text(json.dumps({"per_task": [
             {"task_group": "libero_object", "task_id": t, "metrics": {"successes": s}} for t, s in tasks.items()]}))
-    for folder, steps, source_step in (("E3_teleop", {"0": 150, "1": 151, "2": None, "3": None}, 149),
+    for folder, steps, source_step in (("E3_teleop", {"0": 150, "1": 151, "2": None, "3": None}, None),
                                        ("E1_teleop", {"1": None, "2": None, "3": None}, 149)):
         write_blind(blind, folder, {"2": {"successes": sum(v is not None for v in steps.values()),
                                           "episodes": len(steps), "source_replay_success": True}})
@@ -115,3 +116,12 @@ def test_successes_on_starts_where_the_blind_replay_succeeds_too_beside_chance(t
     assert overlap[label]["E3"] == {"starts": 4, "successes": 3, "with_blind": 2, "by_chance": 1.5}
     assert overlap[label]["E1"] == {"starts": 4, "successes": 1, "with_blind": 1, "by_chance": 0.25}
     assert "| 1 of 1 (by chance 0.2) | - | - | 2 of 3 (by chance 1.5) |" in (out / "sets.md").read_text()
+
+    # Episodes without per-start blind outcomes give no overlap table; a per-task file without them is named.
+    shutil.rmtree(runs / "eval")
+    assert ds.main(["--runs", str(runs), "--blind", str(blind), "--style", "teleop", "--out", str(out)]) == 0
+    assert "blind_overlap" not in json.loads((out / "sets.json").read_text())
+    path = blind / "E3_teleop" / "tasks" / "libero_object" / "task2.json"
+    path.write_text(json.dumps({"task_id": 2, "plans": {"state0": {}}}))
+    assert ds.main(["--runs", str(runs), "--blind", str(blind), "--style", "teleop", "--out", str(out)]) == 2
+    assert f"{path}: no per-start outcomes of the state-0 plan" in capsys.readouterr().err

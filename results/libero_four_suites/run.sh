@@ -8,7 +8,7 @@
 # evaluations task by task). No step and no part of one (`predvla sweep --stop-at`) is started after STOP_AT (any date
 # that `date -d` reads, e.g. "01:00 tomorrow"), if given; progress in runs/logs/chains/four_suites.progress.
 set -u
-source results/chain.sh
+source results/chain.sh || exit 2
 SWEEP=configs/sweeps/libero_four_suites.yaml
 R=results/libero_four_suites/runs
 chain_prefix=$R/logs/chains/four_suites

@@ -5,7 +5,7 @@
 # rest). Physics only, one core; every set resumes task by task. Run from the repository root (or a worktree) after
 # `make libero`; a set is not started after STOP_AT (any date that `date -d` reads, e.g. "01:00 tomorrow"), if given.
 set -u
-source results/chain.sh
+source results/chain.sh || exit 2
 o=results/demonstrations/blind_replay_full
 replay() {  # replay SET STYLE [flags]
   local set=$1 style=$2; shift 2

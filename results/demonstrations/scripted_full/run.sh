@@ -6,7 +6,7 @@
 # first cell that fails. No cell and no task part (`predvla sweep --stop-at`) is started after STOP_AT (any date that
 # `date -d` reads, e.g. "01:00 tomorrow"), if given.
 set -u
-source results/chain.sh
+source results/chain.sh || exit 2
 SWEEP=configs/sweeps/libero_object_demos_scripted_full.yaml
 R=results/demonstrations/scripted_full/runs
 chain_prefix=$R/logs/chains/d1full_chain
