@@ -152,7 +152,10 @@ def eval_protocol(main: dict | None) -> str:
 
 
 def _official(record: dict) -> bool:
-    return record.get("init_states", True) is not False
+    """Whether a record's episodes start from the official init states as LIBERO sets them: not randomised resets,
+    and no object shifted, no LIBERO-PRO / LIBERO-plus variant, no corrupted observation."""
+    return record.get("init_states", True) is not False and not any(
+        record.get(key) for key in ("object_shift", "variant", "corruption"))
 
 
 def main_record(records: list[dict], config: dict) -> dict | None:
