@@ -38,12 +38,6 @@ def part_machine() -> str:
     return f"{machine()}; OpenBLAS {openblas_coretype()}"
 
 
-def recorded_machine(out: Path) -> str | None:
-    """The machine an evaluation part's file names (`part_machine`); None for parts written before it named one."""
-    wall_file = out / EVAL_WALL_FILE
-    return json.loads(wall_file.read_text()).get("machine") if wall_file.is_file() else None
-
-
 class Evaluation(Workspace):
     """Evaluates the runs of a sweep and writes their records."""
 
@@ -174,9 +168,7 @@ class Evaluation(Workspace):
             finished = list(pool.map(lambda part: self.evaluate_part(run, part[1], part[0], part_log(part[0])), parts))
         if not all(finished):
             return False
-        tasks, walls = self.part_results([out for out, _ in parts])
-        # per part (keyed by its first task, as `walls`), the machine it ran on
-        machines = {task: m for (task, _), (out, _) in zip(walls, parts, strict=True) if (m := recorded_machine(out))}
+        tasks, walls, machines = self.part_results([out for out, _ in parts])
         unsettled: dict | None = {task: [] for task in tasks}  # task -> its unsettled episodes' indices
         for out, _ in parts:
             unsettled.update(unsettled_episodes(out / EVAL_INFO_FILE))
@@ -256,10 +248,13 @@ class Evaluation(Workspace):
                 return False
         return True
 
-    def part_results(self, outs: list[Path]) -> tuple[dict[str, dict[str, int]], list[tuple[str, float]]]:
-        """Per-task successes of the parts' `eval_info.json`, sorted by task id, and (first task, wall time) per
-        part."""
-        tasks, walls = {}, []
+    def part_results(
+        self, outs: list[Path]
+    ) -> tuple[dict[str, dict[str, int]], list[tuple[str, float]], dict[str, str]]:
+        """Per-task successes of the parts' `eval_info.json`, sorted by task id; (first task, wall time) per part;
+        and per part's first task the machine its part file names (`part_machine`; parts written before part files
+        named one are left out)."""
+        tasks, walls, machines = {}, [], {}
         for out in outs:
             try:
                 part = parse_eval_info(out / EVAL_INFO_FILE)
@@ -267,6 +262,9 @@ class Evaluation(Workspace):
                 raise SweepError(str(err)) from err
             tasks.update(part)
             wall_file = out / EVAL_WALL_FILE
-            walls.append((next(iter(part)), json.loads(wall_file.read_text())["eval_wall_s"] if wall_file.is_file()
-                          else 0.0))
-        return dict(sorted(tasks.items(), key=lambda kv: int(kv[0]))), walls
+            info = json.loads(wall_file.read_text()) if wall_file.is_file() else {}
+            first = next(iter(part))
+            walls.append((first, info.get("eval_wall_s", 0.0)))
+            if info.get("machine"):
+                machines[first] = info["machine"]
+        return dict(sorted(tasks.items(), key=lambda kv: int(kv[0]))), walls, machines

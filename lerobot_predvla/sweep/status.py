@@ -53,7 +53,7 @@ def sweep_status(runner: Runner, configs: list[str] | None, shard: tuple[int, in
         for run in unit_runs:
             outs = [out for out, _ in runner.eval_parts(run)]
             done = [out for out in outs if (out / EVAL_INFO_FILE).is_file()]
-            tasks, walls = runner.part_results(done) if done else ({}, [])
+            tasks, walls, _ = runner.part_results(done) if done else ({}, [], {})
             recorded = runner.is_recorded(run)
             if recorded and not done:  # a record whose part folders are elsewhere (a copied RUNS_DIR)
                 tasks, done = runner.read_record(run)["tasks"], outs
